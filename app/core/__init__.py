@@ -1,0 +1,45 @@
+"""The e-FSM and its action reviser in pure numpy (Han, Nageshrao, Filev, Özgüner, IFAC 2020).
+
+This package knows nothing of HTTP, pydantic or torch: the service and the client both build
+on it. Start with :class:`Shield` and :class:`ShieldConfig`.
+"""
+
+from app.core.config import (
+    ActionSpec,
+    ClusteringConfig,
+    Criterion,
+    LimitsConfig,
+    ObservationSpec,
+    ReviserConfig,
+    ShieldConfig,
+    TransitionConfig,
+)
+from app.core.errors import (
+    InvalidAction,
+    InvalidConfig,
+    InvalidObservation,
+    InvalidSnapshot,
+    ShieldError,
+    UnknownCriterion,
+)
+from app.core.shield import Candidate, Decision, Shield
+
+__all__ = [
+    "ActionSpec",
+    "Candidate",
+    "ClusteringConfig",
+    "Criterion",
+    "Decision",
+    "InvalidAction",
+    "InvalidConfig",
+    "InvalidObservation",
+    "InvalidSnapshot",
+    "LimitsConfig",
+    "ObservationSpec",
+    "ReviserConfig",
+    "Shield",
+    "ShieldConfig",
+    "ShieldError",
+    "TransitionConfig",
+    "UnknownCriterion",
+]

@@ -1,0 +1,292 @@
+"""Configuration of one e-FSM model: frozen dataclasses with the paper's car-following values.
+
+Every ambiguity of the paper (spec/efsm.md §16, A1-A16) is a named switch whose default is the
+spec's recommendation [REC]; :meth:`ShieldConfig.paper_literal` sets all of them to the literal
+reading. Values are checked on construction and errors name the dotted field at fault.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal, TypeVar, get_args, get_origin, get_type_hints
+
+from app.core.errors import InvalidConfig
+
+Direction = Literal["decrease", "increase"]
+
+
+def _check(ok: bool, field_name: str, message: str) -> None:
+    if not ok:
+        raise InvalidConfig(message, field=field_name)
+
+
+@dataclass(frozen=True)
+class ObservationSpec:
+    """The e-FSM observation z_t (Eq. 12) and the bounds that normalise it.
+
+    [REC] z is scaled to ``(z - low) / (high - low)`` before clustering, so that no dimension
+    dominates the distances (spec §2.4: divide by (32, 200, 32)).
+    """
+
+    names: tuple[str, ...] = ("v_ego", "headway", "v_lead")
+    low: tuple[float, ...] = (0.0, 0.0, 0.0)  # [m/s, m, m/s]
+    high: tuple[float, ...] = (32.0, 200.0, 32.0)  # [m/s, m, m/s]
+
+    def __post_init__(self) -> None:
+        _check(len(self.names) >= 1, "names", "at least one observation dimension is needed")
+        _check(len(set(self.names)) == len(self.names), "names", "names must be unique")
+        _check(len(self.low) == len(self.names), "low", "low needs one bound per name")
+        _check(len(self.high) == len(self.names), "high", "high needs one bound per name")
+        for lo, hi in zip(self.low, self.high, strict=True):
+            _check(math.isfinite(lo) and math.isfinite(hi), "low", "bounds must be finite")
+            _check(hi > lo, "high", "every high bound must exceed its low bound")
+
+    @property
+    def size(self) -> int:
+        """Number of observation dimensions."""
+        return len(self.names)
+
+
+@dataclass(frozen=True)
+class ActionSpec:
+    """The continuous action range A_c and its discretisation into q bins of width delta (§6)."""
+
+    low: float = -2.0  # [m/s²]
+    high: float = 2.0  # [m/s²]
+    step: float = 0.2  # [m/s²], the paper's delta
+    out_of_range: Literal["clip", "reject"] = "clip"
+
+    def __post_init__(self) -> None:
+        _check(math.isfinite(self.low) and math.isfinite(self.high), "low", "must be finite")
+        _check(self.high > self.low, "high", "high must exceed low")
+        _check(math.isfinite(self.step) and self.step > 0, "step", "step must be positive")
+        bins = (self.high - self.low) / self.step
+        _check(
+            abs(bins - round(bins)) < 1e-9 and round(bins) >= 2,
+            "step",
+            "the range must hold a whole number (>= 2) of steps",
+        )
+
+    @property
+    def n_bins(self) -> int:
+        """Number of discrete actions q (20 for [-2, 2] with delta = 0.2)."""
+        return round((self.high - self.low) / self.step)
+
+
+@dataclass(frozen=True)
+class Criterion:
+    """An unfavourable-state criterion: its name and where the reviser searches against it."""
+
+    name: str
+    direction: Direction
+
+    def __post_init__(self) -> None:
+        _check(bool(self.name), "name", "a criterion needs a name")
+        _check(self.name != "ok", "name", "'ok' is reserved for the favourable verdict")
+        _check(
+            self.direction in ("decrease", "increase"),
+            "direction",
+            "direction is 'decrease' or 'increase'",
+        )
+
+
+PAPER_CRITERIA = (
+    Criterion("collision", "decrease"),  # l_s: slow down against a crash
+    Criterion("large_distance", "increase"),  # l_ld: speed up against falling behind
+)
+
+
+@dataclass(frozen=True)
+class ClusteringConfig:
+    """Online evolving clustering (spec §2-3).
+
+    ``rho`` (0.7) and ``epsilon`` (0.3) are the paper's eTS coefficients. [REC] rho is the
+    radius learning constant, epsilon the zone-of-influence radius in normalised units and the
+    initial spread of a new state (§2.3).
+    """
+
+    rho: float = 0.7
+    epsilon: float = 0.3
+    creation_rule: Literal["ets_plus", "ets2004"] = "ets_plus"  # A2
+    spread: Literal["radius", "member_variance", "ets2004"] = "radius"  # A9
+    min_variance: float = 1e-4
+
+    def __post_init__(self) -> None:
+        _check(0.0 <= self.rho <= 1.0, "rho", "rho lies in [0, 1]")
+        _check(self.epsilon > 0 and math.isfinite(self.epsilon), "epsilon", "must be positive")
+        _check(self.min_variance > 0, "min_variance", "must be positive")
+
+
+@dataclass(frozen=True)
+class TransitionConfig:
+    """Online transition identification, Eqs. 3-4 (spec §7-8)."""
+
+    learning_rate: float = 0.01  # phi [REC]
+    prior: float = 1e-3  # F(0) = F_o(0) = epsilon-bar [REC], must be > 0
+    on_new_state: Literal["skip", "pad"] = "skip"  # A3
+    expansion: Literal["prior", "zero_uniform", "zero_identity"] = "prior"  # A10
+    action_source: Literal["executed", "proposed"] = "executed"  # A8
+    across_episodes: bool = False  # A13
+    on_replace: Literal["keep", "reset"] = "keep"  # A16
+
+    def __post_init__(self) -> None:
+        _check(0.0 < self.learning_rate < 1.0, "learning_rate", "phi lies in (0, 1)")
+        _check(self.prior > 0 and math.isfinite(self.prior), "prior", "must be positive")
+
+
+@dataclass(frozen=True)
+class ReviserConfig:
+    """The action reviser, Algs. 1-3, and its exploration noise (spec §10-13)."""
+
+    activate_after_episodes: int = 50  # xi
+    noise_k: float = 0.001  # K
+    noise: Literal["variance", "std"] = "variance"  # A7: V = a_max / max(1, K * episode)
+    horizon: int = 1  # k, prediction steps
+    transpose: bool = True  # A1: Prob_pred = P^T Prob(S_t)
+    inspect: Literal["any", "first_index"] = "any"  # A5
+    search: Literal["fixed", "literal"] = "fixed"  # A6
+    multi_step: Literal["iterate", "single"] = "iterate"  # A11
+    flags: Literal["sticky", "overwrite"] = "sticky"  # A4
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        _check(self.activate_after_episodes >= 0, "activate_after_episodes", "must be >= 0")
+        _check(self.noise_k >= 0 and math.isfinite(self.noise_k), "noise_k", "must be >= 0")
+        _check(1 <= self.horizon <= 16, "horizon", "horizon lies in [1, 16]")
+        _check(0 <= self.seed < 2**63, "seed", "seed lies in [0, 2**63)")
+
+
+@dataclass(frozen=True)
+class LimitsConfig:
+    """Bounds that keep the cost of a step flat as the model grows.
+
+    When ``max_states`` is reached no state is created any more: an observation that would
+    have made one joins its nearest state instead (counted as ``capacity_hits``).
+    ``belief_top_k`` truncates beliefs and propagated predictions to their k most likely
+    states (exact when k >= the number of states).
+    """
+
+    max_states: int = 10_000
+    belief_top_k: int = 32
+    tpm_backend: Literal["lazy", "dense"] = "lazy"
+
+    def __post_init__(self) -> None:
+        _check(1 <= self.max_states <= 1_000_000, "max_states", "lies in [1, 1000000]")
+        _check(self.belief_top_k >= 1, "belief_top_k", "must be >= 1")
+
+
+@dataclass(frozen=True)
+class ShieldConfig:
+    """Everything one e-FSM model needs; the defaults are the paper's car-following values."""
+
+    observation: ObservationSpec = field(default_factory=ObservationSpec)
+    action: ActionSpec = field(default_factory=ActionSpec)
+    criteria: tuple[Criterion, ...] = PAPER_CRITERIA
+    clustering: ClusteringConfig = field(default_factory=ClusteringConfig)
+    transitions: TransitionConfig = field(default_factory=TransitionConfig)
+    reviser: ReviserConfig = field(default_factory=ReviserConfig)
+    limits: LimitsConfig = field(default_factory=LimitsConfig)
+
+    def __post_init__(self) -> None:
+        names = [c.name for c in self.criteria]
+        _check(len(set(names)) == len(names), "criteria", "criterion names must be unique")
+
+    @classmethod
+    def paper_literal(cls, **overrides: Any) -> ShieldConfig:
+        """The literal reading of every ambiguity of spec §16 (A1-A16)."""
+        literal = cls(
+            clustering=ClusteringConfig(creation_rule="ets2004"),
+            transitions=TransitionConfig(action_source="proposed", across_episodes=True),
+            reviser=ReviserConfig(
+                transpose=False,
+                inspect="first_index",
+                search="literal",
+                multi_step="single",
+                flags="overwrite",
+            ),
+        )
+        return dataclasses.replace(literal, **overrides)
+
+    def criterion_index(self, name: str) -> int | None:
+        """Priority index of a criterion (0 = highest), or None if it is not configured."""
+        for i, criterion in enumerate(self.criteria):
+            if criterion.name == name:
+                return i
+        return None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able data; :meth:`from_dict` inverts it."""
+        data = dataclasses.asdict(self)
+        return _lists(data)  # type: ignore[no-any-return]
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> ShieldConfig:
+        """Build a configuration from nested plain data; missing fields take their defaults."""
+        return _build(cls, data, "")
+
+
+def _lists(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _lists(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_lists(v) for v in value]
+    return value
+
+
+T = TypeVar("T")
+
+
+def _build(cls: type[T], data: Any, path: str) -> T:
+    if not isinstance(data, Mapping):
+        raise InvalidConfig("expected an object", field=path or None)
+    hints = get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise InvalidConfig(f"unknown field {unknown[0]!r}", field=_join(path, unknown[0]))
+    kwargs = {k: _convert(hints[k], v, _join(path, k)) for k, v in data.items()}
+    try:
+        return cls(**kwargs)
+    except InvalidConfig as error:
+        error.field = _join(path, error.field or "")
+        raise
+
+
+def _convert(hint: Any, value: Any, path: str) -> Any:
+    origin = get_origin(hint)
+    if dataclasses.is_dataclass(hint):
+        return _build(hint, value, path)  # type: ignore[arg-type]
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise InvalidConfig("expected a list", field=path)
+        item = get_args(hint)[0]
+        return tuple(_convert(item, v, f"{path}.{i}") for i, v in enumerate(value))
+    if origin is Literal:
+        if value not in get_args(hint):
+            options = ", ".join(repr(a) for a in get_args(hint))
+            raise InvalidConfig(f"expected one of {options}", field=path)
+        return value
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise InvalidConfig("expected a boolean", field=path)
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise InvalidConfig("expected an integer", field=path)
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise InvalidConfig("expected a number", field=path)
+        return float(value)
+    if hint is str:
+        if not isinstance(value, str):
+            raise InvalidConfig("expected a string", field=path)
+        return value
+    raise InvalidConfig("unsupported field", field=path)  # pragma: no cover
+
+
+def _join(path: str, name: str) -> str:
+    return f"{path}.{name}" if path and name else path or name

@@ -1,0 +1,283 @@
+"""The TPMs of Eqs. 3-4 in a lazy form whose memory and per-step cost do not grow as n^2.
+
+Write ``D_a = (1 - phi)^u_a`` for the decay after ``u_a`` updates of action ``a``. Unrolling
+Eqs. 3-4 with epsilon-bar padding (§8) gives, for every entry of ``F^a``:
+
+    F^a(i, j) = D_a * (eps * g_a(max(i, j)) + S_a(i, j)),   g_a(m) = 1 / D_a(when m appeared)
+
+The first term is the padding, which depends only on when states appeared; the second is what
+was learned, ``S_a = sum_t phi tau_t gamma_t^T / D_a(t)``, sparse because beliefs are truncated
+to their top-k states. Rows are normalised on demand: ``P^a(i, .) = F^a(i, .) / F_o^a(i)``.
+
+Scales live in the log domain (``lg_a(m) = log g_a(m)``, ``ld_a = log D_a``) and each learned row
+keeps its own offset, so nothing overflows or underflows to 0/0 over millions of steps: the
+stable form of spec §7 without its dense rows. Only the rows a belief touches are read or
+written; a prediction costs O(k W + n) for k belief states and W stored entries per row.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from app.core._arrays import ensure_capacity
+from app.core.belief import Belief
+from app.core.config import TransitionConfig
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+class LazyTransitions:
+    """All TPMs of one model: padding in closed form, learned mass in sparse rows."""
+
+    def __init__(self, n_actions: int, config: TransitionConfig, max_states: int) -> None:
+        self.config = config
+        self.n_actions = n_actions
+        self.max_states = max_states
+        self._n = 0
+        q = n_actions
+        self._log_decay = np.zeros(q)  # ld_a = log D_a
+        self._created = np.zeros((q, 0))  # lg_a(m) = -ld_a when state m appeared
+        self._pad = np.zeros((q, 0))  # exp(lg_a(m) - lg_a(n-1)), prior mode
+        self._pad_tail = np.zeros((q, 1))  # sum_{j >= m} pad_a(j), with a trailing 0
+        self._offset = np.zeros((q, 0))  # learned row i is exp(offset) * vals
+        self._row_sum = np.zeros((q, 0))  # sum of vals per row
+        self._nnz = np.zeros((q, 0), dtype=np.int64)
+        self._cols: list[IntArray] = [np.zeros((0, 0), dtype=np.int64) for _ in range(q)]
+        self._vals: list[FloatArray] = [np.zeros((0, 0)) for _ in range(q)]
+        self._log_prior = math.log(config.prior)
+
+    @property
+    def n_states(self) -> int:
+        """Current matrix size n."""
+        return self._n
+
+    def add_state(self) -> None:
+        """Expand every matrix by one state (§8): the new pads are ``eps`` at today's scale."""
+        n, limit = self._n, self.max_states
+        self._created = ensure_capacity(self._created, n + 1, limit, axis=1)
+        self._pad = ensure_capacity(self._pad, n + 1, limit, axis=1)
+        self._pad_tail = ensure_capacity(self._pad_tail, n + 2, limit + 1, axis=1)
+        self._offset = ensure_capacity(self._offset, n + 1, limit, axis=1)
+        self._row_sum = ensure_capacity(self._row_sum, n + 1, limit, axis=1)
+        self._nnz = ensure_capacity(self._nnz, n + 1, limit, axis=1)
+        for a in range(self.n_actions):
+            self._cols[a] = ensure_capacity(self._cols[a], n + 1, limit)
+            self._vals[a] = ensure_capacity(self._vals[a], n + 1, limit)
+        self._created[:, n] = -self._log_decay
+        self._offset[:, n] = -self._log_decay
+        self._n = n + 1
+        self._refresh_pads()
+
+    def _refresh_pads(self) -> None:
+        if self.config.expansion != "prior" or self._n == 0:
+            return
+        n = self._n
+        created = self._created[:, :n]
+        self._pad[:, :n] = np.exp(created - created[:, n - 1 : n])
+        self._pad_tail[:, :n] = np.cumsum(self._pad[:, n - 1 :: -1], axis=1)[:, ::-1]
+        self._pad_tail[:, n] = 0.0
+
+    def learn_one(self, prev: Belief, action_bin: int, belief: Belief) -> None:
+        """Eqs. 3-4 with tau = prev, gamma = belief, for the matrix of ``action_bin``.
+
+        ``F <- (1 - phi) F + phi tau gamma^T`` becomes ``D <- (1 - phi) D`` and
+        ``S += phi tau gamma^T / D``; touched rows are first re-based to the new scale.
+        """
+        a, lr = action_bin, self.config.learning_rate
+        self._log_decay[a] += math.log1p(-lr)
+        rows, tau = prev.index, prev.prob
+        cols, gamma = belief.index, belief.prob
+        factor = np.exp(self._offset[a, rows] + self._log_decay[a])  # <= 1
+        self._offset[a, rows] = -self._log_decay[a]
+        self._row_sum[a, rows] = self._row_sum[a, rows] * factor + lr * tau * gamma.sum()
+        contrib = lr * tau[:, None] * gamma[None, :]
+
+        nnz = self._nnz[a, rows]
+        width = self._vals[a].shape[1]
+        if width:
+            self._vals[a][rows] *= factor[:, None]
+            stored = self._cols[a][rows]
+            valid = np.arange(width)[None, :] < nnz[:, None]
+            match = (stored[:, :, None] == cols[None, None, :]) & valid[:, :, None]
+            found = match.any(axis=1)
+            slot = match.argmax(axis=1)
+            fr, fc = np.nonzero(found)
+            self._vals[a][rows[fr], slot[fr, fc]] += contrib[fr, fc]
+        else:
+            found = np.zeros((rows.size, cols.size), dtype=bool)
+
+        missing = ~found
+        added = missing.sum(axis=1)
+        needed = int((nnz + added).max(initial=0))
+        if needed > width:
+            new_width = max(needed, 2 * width, 8)
+            self._cols[a] = ensure_capacity(self._cols[a], new_width, new_width, axis=1)
+            self._vals[a] = ensure_capacity(self._vals[a], new_width, new_width, axis=1)
+        mr, mc = np.nonzero(missing)
+        slot_new = nnz[mr] + (np.cumsum(missing, axis=1) - 1)[mr, mc]
+        self._cols[a][rows[mr], slot_new] = cols[mc]
+        self._vals[a][rows[mr], slot_new] = contrib[mr, mc]
+        self._nnz[a, rows] = nnz + added
+
+    def _log_norm(self, a: int, rows: IntArray) -> FloatArray:
+        """``log(F_o^a(i) / D_a)`` for the given rows: padding mass (+) learned mass."""
+        mode = self.config.expansion
+        if mode == "prior":
+            n = self._n
+            pad_mass = self._pad[a, rows] * (rows + 1) + self._pad_tail[a, rows + 1]
+            log_pad = self._log_prior + self._created[a, n - 1] + np.log(pad_mass)
+        elif mode == "zero_uniform":
+            log_pad = self._log_prior + self._created[a, rows] + np.log(rows + 1.0)
+        else:
+            log_pad = self._log_prior + self._created[a, rows]
+        with np.errstate(divide="ignore"):
+            log_learned = self._offset[a, rows] + np.log(self._row_sum[a, rows])
+        log_norm: FloatArray = np.logaddexp(log_pad, log_learned)
+        return log_norm
+
+    def predict(self, belief: Belief, action_bin: int, transpose: bool) -> FloatArray:
+        """Eq. 5: ``P^T p`` when ``transpose`` ([REC], A1), else the literal ``P p``."""
+        if transpose:
+            return self._predict_transposed(belief, action_bin)
+        return self._predict_literal(belief, action_bin)
+
+    def _predict_transposed(self, belief: Belief, a: int) -> FloatArray:
+        n, rows, p = self._n, belief.index, belief.prob
+        log_norm = self._log_norm(a, rows)
+        learned = p * np.exp(self._offset[a, rows] - log_norm)
+        vals = self._vals[a][rows] * learned[:, None]
+        cols = self._cols[a][rows].ravel()
+        pred = np.bincount(cols, weights=vals.ravel(), minlength=n).astype(np.float64)
+        before = np.searchsorted(rows, np.arange(n))  # belief rows with index < j
+        mode = self.config.expansion
+        if mode == "prior":
+            # sum_i c_i pad(max(i, j)) = pad(j) sum_{i<j} c_i + sum_{i>=j} c_i pad(i)
+            c = p * np.exp(self._log_prior + self._created[a, n - 1] - log_norm)
+            below = np.concatenate(([0.0], np.cumsum(c)))
+            weighted = np.concatenate(([0.0], np.cumsum(c * self._pad[a, rows])))
+            pred += self._pad[a, :n] * below[before] + (weighted[-1] - weighted[before])
+        else:
+            c = p * np.exp(self._log_prior + self._created[a, rows] - log_norm)
+            if mode == "zero_uniform":  # row i spreads over columns j <= i
+                cum = np.concatenate(([0.0], np.cumsum(c)))
+                pred += cum[-1] - cum[before]
+            else:
+                pred[rows] += c
+        return pred
+
+    def _predict_literal(self, belief: Belief, a: int) -> FloatArray:
+        n = self._n
+        rows = np.arange(n)
+        p = belief.dense(n)
+        log_norm = self._log_norm(a, rows)
+        vals, cols = self._vals[a][:n], self._cols[a][:n]
+        pred: FloatArray = (vals * p[cols]).sum(axis=1) * np.exp(self._offset[a, :n] - log_norm)
+        mode = self.config.expansion
+        if mode == "prior":
+            pad = self._pad[a, :n]
+            at_or_below = np.cumsum(p)
+            weighted = np.cumsum(p * pad)
+            scale = np.exp(self._log_prior + self._created[a, n - 1] - log_norm)
+            pred += scale * (pad * at_or_below + (weighted[-1] - weighted))
+        else:
+            scale = np.exp(self._log_prior + self._created[a, :n] - log_norm)
+            pred += scale * (np.cumsum(p) if mode == "zero_uniform" else p)
+        return pred
+
+    def reset_row(self, state: int) -> None:
+        """A16 ``reset``: drop the learned mass of a moved state; its padding stays."""
+        for a in range(self.n_actions):
+            self._vals[a][state] = 0.0
+            self._nnz[a, state] = 0
+            self._row_sum[a, state] = 0.0
+            self._offset[a, state] = -self._log_decay[a]
+
+    def matrix(self, action_bin: int) -> FloatArray:
+        """The dense n x n matrix of one action (for snapshots and tests)."""
+        a, n = action_bin, self._n
+        rows = np.arange(n)
+        log_norm = self._log_norm(a, rows)
+        mode = self.config.expansion
+        if mode == "prior":
+            scale = np.exp(self._log_prior + self._created[a, n - 1] - log_norm)
+            out: FloatArray = self._pad[a, np.maximum.outer(rows, rows)] * scale[:, None]
+        else:
+            scale = np.exp(self._log_prior + self._created[a, :n] - log_norm)
+            shape = np.tril(np.ones((n, n))) if mode == "zero_uniform" else np.eye(n)
+            out = shape * scale[:, None]
+        learned = self._vals[a][:n] * np.exp(self._offset[a, :n] - log_norm)[:, None]
+        np.add.at(out, (np.repeat(rows, learned.shape[1]), self._cols[a][:n].ravel()),
+                  learned.ravel())
+        return out
+
+    def row_mass(self, action_bin: int) -> FloatArray:
+        """``F_o`` of one action: the weighted departure count of every state (Eq. 4)."""
+        a = action_bin
+        mass: FloatArray = np.exp(self._log_decay[a] + self._log_norm(a, np.arange(self._n)))
+        return mass
+
+    def nbytes(self) -> int:
+        """Memory held by the matrices."""
+        arrays = [self._created, self._pad, self._pad_tail, self._offset, self._row_sum,
+                  self._nnz, *self._cols, *self._vals]
+        return sum(int(x.nbytes) for x in arrays)
+
+    def snapshot(self) -> dict[str, Any]:
+        """Exact state: scales plus the learned entries of every row, in slot order."""
+        n = self._n
+        actions = []
+        for a in range(self.n_actions):
+            width = self._vals[a].shape[1]
+            valid = np.arange(width)[None, :] < self._nnz[a, :n, None]
+            actions.append(
+                {
+                    "width": width,
+                    "nnz": self._nnz[a, :n].copy(),
+                    "offset": self._offset[a, :n].copy(),
+                    "row_sum": self._row_sum[a, :n].copy(),
+                    "cols": self._cols[a][:n][valid],
+                    "vals": self._vals[a][:n][valid],
+                }
+            )
+        return {
+            "backend": "lazy",
+            "n_states": n,
+            "log_decay": self._log_decay.copy(),
+            "created": self._created[:, :n].copy(),
+            "actions": actions,
+        }
+
+    @classmethod
+    def restore(
+        cls, n_actions: int, config: TransitionConfig, max_states: int, data: dict[str, Any]
+    ) -> LazyTransitions:
+        """Rebuild from :meth:`snapshot` output, bit for bit."""
+        self = cls(n_actions, config, max_states)
+        n = int(data["n_states"])
+        q = n_actions
+        self._n = n
+        self._log_decay = np.array(data["log_decay"], dtype=np.float64).reshape(q)
+        self._created = np.array(data["created"], dtype=np.float64).reshape(q, n)
+        self._pad = np.zeros((q, n))
+        self._pad_tail = np.zeros((q, n + 1))
+        self._offset = np.zeros((q, n))
+        self._row_sum = np.zeros((q, n))
+        self._nnz = np.zeros((q, n), dtype=np.int64)
+        for a, entry in enumerate(data["actions"]):
+            width = int(entry["width"])
+            nnz = np.array(entry["nnz"], dtype=np.int64).reshape(n)
+            self._nnz[a] = nnz
+            self._offset[a] = np.array(entry["offset"], dtype=np.float64).reshape(n)
+            self._row_sum[a] = np.array(entry["row_sum"], dtype=np.float64).reshape(n)
+            valid = np.arange(width)[None, :] < nnz[:, None]
+            self._cols[a] = np.zeros((n, width), dtype=np.int64)
+            self._vals[a] = np.zeros((n, width))
+            self._cols[a][valid] = np.array(entry["cols"], dtype=np.int64)
+            self._vals[a][valid] = np.array(entry["vals"], dtype=np.float64)
+        self._refresh_pads()
+        return self

@@ -1,0 +1,486 @@
+"""One e-FSM model and its action reviser, driven one step at a time (spec/api.md "One step").
+
+:class:`Shield` is what the service holds per model: it clusters the observation, recognises
+the belief, learns the transition of each stream, flags unfavourable states and revises the
+proposed action. Many streams share one model; each stream keeps only its previous step. A
+step is validated completely before anything changes, so a refused step leaves no trace.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from app.core import actions, reviser
+from app.core.belief import Belief, recognise
+from app.core.clustering import EvolvingClusterer
+from app.core.config import ShieldConfig
+from app.core.errors import (
+    InvalidAction,
+    InvalidConfig,
+    InvalidObservation,
+    InvalidSnapshot,
+    ShieldError,
+    UnknownCriterion,
+)
+from app.core.flags import StateFlags
+from app.core.lazy_tpm import LazyTransitions
+from app.core.tpm import DenseTransitions, TransitionModel
+
+FloatArray = npt.NDArray[np.float64]
+SNAPSHOT_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """An action the reviser inspected: the bin's midpoint, the bin, and its verdict."""
+
+    action: float
+    bin: int
+    verdict: str
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The decision record of one step (spec/api.md)."""
+
+    action: float | None
+    proposed: float | None
+    revised: bool
+    reason: str
+    verdict: str
+    risk: dict[str, float]
+    threshold: float | None
+    candidates: tuple[Candidate, ...]
+    state: int | None
+    n_states: int
+    new_state: bool
+    episode: int
+    step: int
+    model_version: int
+    stream: str
+    shadow: bool = False
+    suggested: float | None = None
+
+
+@dataclass(frozen=True)
+class StepInput:
+    """A validated step: what :meth:`Shield.apply` consumes."""
+
+    observation: FloatArray
+    action: float | None
+    stream: str
+    event: int | None
+    done: bool
+    applied_action: float | None
+    learn: bool
+    shadow: bool
+
+
+@dataclass
+class StreamState:
+    """What a stream remembers between its steps: tau and the action behind the transition."""
+
+    belief: Belief | None = None
+    applied_bin: int = 0
+    proposed_bin: int = 0
+    step: int = 0
+
+
+@dataclass
+class Counters:
+    """Totals of a model's life."""
+
+    steps: int = 0
+    episodes: int = 0
+    model_version: int = 0
+    interventions: dict[str, int] = field(default_factory=dict)
+
+
+class Shield:
+    """An evolving finite state machine (e-FSM) with its action reviser."""
+
+    def __init__(self, config: ShieldConfig | None = None) -> None:
+        self.config = config if config is not None else ShieldConfig()
+        cfg = self.config
+        if cfg.transitions.on_replace == "reset" and cfg.limits.tpm_backend == "dense":
+            raise InvalidConfig(
+                "on_replace='reset' needs the lazy TPM backend", field="transitions.on_replace"
+            )
+        self._dim = cfg.observation.size
+        self._low = np.array(cfg.observation.low)
+        self._range = np.array(cfg.observation.high) - self._low
+        self._directions = [c.direction for c in cfg.criteria]
+        self._a_max = max(abs(cfg.action.low), abs(cfg.action.high))
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything: no states, no streams, counters at zero, the seed's generator."""
+        cfg = self.config
+        self.clusterer = EvolvingClusterer(cfg.clustering, self._dim, cfg.limits.max_states)
+        self.transitions: TransitionModel = self._new_transitions()
+        self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states)
+        self.streams: dict[str, StreamState] = {}
+        self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria})
+        self._rng = np.random.default_rng(cfg.reviser.seed)
+
+    def _new_transitions(self) -> TransitionModel:
+        cfg = self.config
+        q = cfg.action.n_bins
+        if cfg.limits.tpm_backend == "dense":
+            return DenseTransitions(q, cfg.transitions)
+        return LazyTransitions(q, cfg.transitions, cfg.limits.max_states)
+
+    @property
+    def n_states(self) -> int:
+        """Number of states found so far."""
+        return self.clusterer.n_states
+
+    def normalise(self, observation: FloatArray) -> FloatArray:
+        """Physical units to the clustering space: ``(z - low) / (high - low)``."""
+        z: FloatArray = (observation - self._low) / self._range
+        return z
+
+    # --- one step --------------------------------------------------------------------------
+
+    def step(
+        self,
+        observation: Sequence[float] | FloatArray,
+        action: float | None,
+        *,
+        stream: str = "0",
+        event: str | None = None,
+        done: bool = False,
+        applied_action: float | None = None,
+        learn: bool = True,
+        shadow: bool = False,
+    ) -> Decision:
+        """Learn from one observation and answer the proposed action (spec/api.md order)."""
+        return self.apply(
+            self.validate(
+                observation,
+                action,
+                stream=stream,
+                event=event,
+                done=done,
+                applied_action=applied_action,
+                learn=learn,
+                shadow=shadow,
+            )
+        )
+
+    def validate(
+        self,
+        observation: Sequence[float] | FloatArray,
+        action: float | None,
+        *,
+        stream: str = "0",
+        event: str | None = None,
+        done: bool = False,
+        applied_action: float | None = None,
+        learn: bool = True,
+        shadow: bool = False,
+    ) -> StepInput:
+        """Check a step without changing anything; raise a :class:`ShieldError` naming the field."""
+        try:
+            z = np.array(observation, dtype=np.float64)
+        except (TypeError, ValueError) as error:
+            raise InvalidObservation("observation must be a list of numbers",
+                                     field="observation") from error
+        if z.shape != (self._dim,):
+            raise InvalidObservation(
+                f"observation must hold {self._dim} numbers, got shape {list(z.shape)}",
+                field="observation",
+            )
+        if not np.all(np.isfinite(z)):
+            raise InvalidObservation("observation must be finite (no NaN or infinity)",
+                                     field="observation")
+        if not isinstance(stream, str) or not 1 <= len(stream) <= 128:
+            raise ShieldError("stream must be a string of 1 to 128 characters", field="stream")
+        criterion = None
+        if event is not None:
+            criterion = self.config.criterion_index(event)
+            if criterion is None:
+                known = ", ".join(c.name for c in self.config.criteria)
+                raise UnknownCriterion(f"unknown criterion {event!r} (known: {known})",
+                                       field="event")
+        if action is None and not done:
+            raise InvalidAction("action is required unless done is true", field="action")
+        return StepInput(
+            observation=z,
+            action=None if action is None else self._check_action(action, "action"),
+            stream=stream,
+            event=criterion,
+            done=bool(done),
+            applied_action=(
+                None if applied_action is None
+                else self._check_action(applied_action, "applied_action")
+            ),
+            learn=bool(learn),
+            shadow=bool(shadow),
+        )
+
+    def _check_action(self, value: float, name: str) -> float:
+        spec = self.config.action
+        if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
+            raise InvalidAction(f"{name} must be a number", field=name)
+        value = float(value)
+        if not math.isfinite(value):
+            raise InvalidAction(f"{name} must be finite", field=name)
+        if not spec.low <= value <= spec.high:
+            if spec.out_of_range == "reject":
+                raise InvalidAction(
+                    f"{name} {value} lies outside [{spec.low}, {spec.high}]", field=name
+                )
+            value = min(max(value, spec.low), spec.high)
+        return value
+
+    def apply(self, step: StepInput) -> Decision:
+        """Carry out a validated step."""
+        if not step.learn:
+            return self._what_if(step)
+        cfg = self.config
+        z = self.normalise(step.observation)
+        # §2.4 clustering: a new state expands every TPM (§8)
+        update = self.clusterer.learn_one(z)
+        if update.is_new:
+            self.transitions.add_state()
+            self.flags.add_state()
+        elif update.kind == "replaced" and cfg.transitions.on_replace == "reset":
+            self.transitions.reset_row(update.index)  # A16
+        # Eq. 1 recognition, after clustering
+        belief = recognise(update.sq_distances, self.clusterer.variances(),
+                           cfg.limits.belief_top_k)
+        # Eqs. 3-4 for the stream's previous step, under the action behind the transition
+        state = self.streams.setdefault(step.stream, StreamState())
+        self._learn_transition(state, belief, update.is_new, step.applied_action)
+        # §5 flags on the recognised state
+        recognised = belief.argmax()
+        self.flags.observe(recognised, step.event)
+        self.counters.steps += 1
+        self.counters.model_version += 1
+
+        if step.done:
+            self.counters.episodes += 1
+            if cfg.transitions.across_episodes:  # A13 literal: the next reset is learned
+                state.belief, state.step = belief, 0
+            else:
+                del self.streams[step.stream]
+            return self._closing(step, recognised, update.is_new, state.step)
+
+        decision = self._decide(step, belief, recognised, update.is_new, state.step, self._rng)
+        state.belief = belief
+        state.applied_bin = actions.encode(decision.action, cfg.action)  # type: ignore[arg-type]
+        state.proposed_bin = actions.encode(step.action, cfg.action)  # type: ignore[arg-type]
+        state.step += 1
+        if decision.revised and not decision.shadow:
+            self.counters.interventions[decision.verdict] += 1
+        return decision
+
+    def _learn_transition(
+        self, state: StreamState, belief: Belief, is_new: bool, applied: float | None
+    ) -> None:
+        cfg = self.config.transitions
+        if state.belief is None:
+            return  # first step of an episode: no tau (A13)
+        if is_new and cfg.on_new_state == "skip":
+            return  # A3 (a): tau and gamma have different sizes
+        if applied is not None:
+            action_bin = actions.encode(applied, self.config.action)
+        elif cfg.action_source == "executed":  # A8 [REC]
+            action_bin = state.applied_bin
+        else:  # A8 literal: the controller's proposal
+            action_bin = state.proposed_bin
+        # A3 (b) pads tau with a 0 for the new state: implicit in the sparse belief
+        self.transitions.learn_one(state.belief, action_bin, belief)
+
+    def _what_if(self, step: StepInput) -> Decision:
+        """``learn=False``: answer from the model as it is, changing nothing (noise included)."""
+        state = self.streams.get(step.stream, StreamState())
+        if self.n_states == 0:
+            return self._closing(step, None, False, state.step) if step.done else Decision(
+                action=step.action, proposed=step.action, revised=False, reason="cold_start",
+                verdict="ok", risk=self._risk(None), threshold=None, candidates=(), state=None,
+                n_states=0, new_state=False, episode=self.counters.episodes, step=state.step,
+                model_version=self.counters.model_version, stream=step.stream,
+                shadow=step.shadow, suggested=step.action,
+            )
+        z = self.normalise(step.observation)
+        belief = recognise(self.clusterer.sq_distances(z), self.clusterer.variances(),
+                           self.config.limits.belief_top_k)
+        if step.done:
+            return self._closing(step, belief.argmax(), False, state.step)
+        rng = copy.deepcopy(self._rng)
+        return self._decide(step, belief, belief.argmax(), False, state.step, rng)
+
+    def _closing(self, step: StepInput, recognised: int | None, is_new: bool,
+                 index: int) -> Decision:
+        return Decision(
+            action=None, proposed=step.action, revised=False, reason="done", verdict="ok",
+            risk=self._risk(None), threshold=None, candidates=(), state=recognised,
+            n_states=self.n_states, new_state=is_new, episode=self.counters.episodes,
+            step=index, model_version=self.counters.model_version, stream=step.stream,
+            shadow=step.shadow, suggested=None,
+        )
+
+    def _risk(self, pred: FloatArray | None) -> dict[str, float]:
+        names = [c.name for c in self.config.criteria]
+        if pred is None:
+            return dict.fromkeys(names, 0.0)
+        mass = reviser.risk(pred, np.asarray(self.flags.flags), len(names))
+        return {name: float(m) for name, m in zip(names, mass, strict=True)}
+
+    def _decide(
+        self,
+        step: StepInput,
+        belief: Belief,
+        recognised: int,
+        is_new: bool,
+        index: int,
+        rng: np.random.Generator,
+    ) -> Decision:
+        """Algs. 1-3 on the proposed action, and the revision with its noise (§12-13)."""
+        cfg = self.config
+        proposed = step.action
+        assert proposed is not None
+        flags = np.asarray(self.flags.flags)
+        q = cfg.action.n_bins
+
+        def assess(action_bin: int) -> tuple[int, float, FloatArray]:
+            pred = reviser.predict_ahead(self.transitions, belief, action_bin, cfg.reviser, q,
+                                         cfg.limits.belief_top_k)
+            threshold = reviser.variant_threshold(pred)
+            return reviser.inspect(pred, threshold, flags, cfg.reviser.inspect), threshold, pred
+
+        common = dict(
+            proposed=proposed, state=recognised, n_states=self.n_states, new_state=is_new,
+            episode=self.counters.episodes, step=index,
+            model_version=self.counters.model_version, stream=step.stream, shadow=step.shadow,
+        )
+        if not self.flags.any_flagged():
+            return Decision(action=proposed, revised=False, reason="cold_start", verdict="ok",
+                            risk=self._risk(None), threshold=None, candidates=(),
+                            suggested=proposed, **common)  # type: ignore[arg-type]
+        start = actions.encode(proposed, cfg.action)
+        verdict, threshold, pred = assess(start)
+        record = dict(verdict=self._verdict_name(verdict), risk=self._risk(pred),
+                      threshold=threshold)
+        active = self.counters.episodes >= cfg.reviser.activate_after_episodes
+        if verdict == reviser.OK or not active:
+            reason = "pass" if active else "inactive"
+            return Decision(action=proposed, revised=False, reason=reason, candidates=(),
+                            suggested=proposed, **record, **common)  # type: ignore[arg-type]
+
+        final, tried = reviser.search(
+            start, verdict, self._directions, q, cfg.reviser.search == "literal",
+            lambda r: assess(r)[0],
+        )
+        std = reviser.noise_std(cfg.reviser, self._a_max, self.counters.episodes)
+        revised = actions.decode(final, cfg.action) + float(rng.normal(0.0, std))
+        revised = min(max(revised, cfg.action.low), cfg.action.high)
+        candidates = tuple(
+            Candidate(actions.decode(r, cfg.action), r, self._verdict_name(v)) for r, v in tried
+        )
+        reason = "revised_safety" if self._directions[verdict] == "decrease" else "revised_speed"
+        return Decision(
+            action=proposed if step.shadow else revised, revised=True, reason=reason,
+            candidates=candidates, suggested=revised, **record, **common,  # type: ignore[arg-type]
+        )
+
+    def _verdict_name(self, verdict: int) -> str:
+        return "ok" if verdict == reviser.OK else self.config.criteria[verdict].name
+
+    # --- views and persistence -------------------------------------------------------------
+
+    def states(self) -> dict[str, Any]:
+        """Every state: centre in physical units, spread (normalised std), flag, visits."""
+        names = [None] + [c.name for c in self.config.criteria]
+        return {
+            "centre": self._low + self.clusterer.centres * self._range,
+            "spread": np.sqrt(self.clusterer.variances()),
+            "flag": [names[f] for f in self.flags.flags],
+            "visits": self.flags.visits,
+            "support": self.clusterer.support,
+        }
+
+    def snapshot(self) -> dict[str, Any]:
+        """Everything the model is, as plain data and numpy arrays."""
+        return {
+            "format": SNAPSHOT_FORMAT,
+            "config": self.config.to_dict(),
+            "counters": {
+                "steps": self.counters.steps,
+                "episodes": self.counters.episodes,
+                "model_version": self.counters.model_version,
+                "interventions": dict(self.counters.interventions),
+            },
+            "rng": copy.deepcopy(self._rng.bit_generator.state),
+            "clustering": self.clusterer.snapshot(),
+            "transitions": self.transitions.snapshot(),
+            "flags": self.flags.snapshot(),
+            "streams": {
+                name: {
+                    "index": None if s.belief is None else s.belief.index.copy(),
+                    "prob": None if s.belief is None else s.belief.prob.copy(),
+                    "applied_bin": s.applied_bin,
+                    "proposed_bin": s.proposed_bin,
+                    "step": s.step,
+                }
+                for name, s in self.streams.items()
+            },
+        }
+
+    @classmethod
+    def from_snapshot(cls, data: dict[str, Any]) -> Shield:
+        """Rebuild a shield that makes exactly the decisions the original would make."""
+        if not isinstance(data, dict) or data.get("format") != SNAPSHOT_FORMAT:
+            raise InvalidSnapshot(f"expected snapshot format {SNAPSHOT_FORMAT}", field="format")
+        try:
+            return cls._restore(data)
+        except ShieldError:
+            raise
+        except (KeyError, TypeError, ValueError, IndexError) as error:
+            raise InvalidSnapshot(f"snapshot is incomplete or inconsistent: {error!r}") from error
+
+    @classmethod
+    def _restore(cls, data: dict[str, Any]) -> Shield:
+        self = cls(ShieldConfig.from_dict(data["config"]))
+        cfg = self.config
+        counters = data["counters"]
+        self.counters = Counters(
+            steps=int(counters["steps"]),
+            episodes=int(counters["episodes"]),
+            model_version=int(counters["model_version"]),
+            interventions={c.name: int(counters["interventions"][c.name]) for c in cfg.criteria},
+        )
+        self._rng.bit_generator.state = data["rng"]
+        limit = cfg.limits.max_states
+        self.clusterer = EvolvingClusterer.restore(cfg.clustering, self._dim, limit,
+                                                   data["clustering"])
+        tpm = data["transitions"]
+        if tpm["backend"] == "dense":
+            self.transitions = DenseTransitions.restore(cfg.action.n_bins, cfg.transitions, tpm)
+        else:
+            self.transitions = LazyTransitions.restore(cfg.action.n_bins, cfg.transitions,
+                                                       limit, tpm)
+        self.flags = StateFlags.restore(cfg.reviser.flags, limit, data["flags"])
+        n = self.clusterer.n_states
+        if self.transitions.n_states != n or self.flags.flags.shape[0] != n:
+            raise InvalidSnapshot("states, matrices and flags disagree on the state count")
+        self.streams = {}
+        for name, s in data["streams"].items():
+            belief = None
+            if s["index"] is not None:
+                belief = Belief(np.array(s["index"], dtype=np.int64),
+                                np.array(s["prob"], dtype=np.float64))
+            self.streams[str(name)] = StreamState(
+                belief, int(s["applied_bin"]), int(s["proposed_bin"]), int(s["step"])
+            )
+        return self
+
