@@ -193,6 +193,7 @@ class EvolvingClusterer:
             "sigma": self.sigma,
             "capacity_hits": self.capacity_hits,
             "centres": self._centres[:n].copy(),
+            "sq_norms": self._sq_norms[:n].copy(),
             "potentials": self._potentials[:n].copy(),
             "radii": self._radii[:n].copy(),
             "support": self._support[:n].copy(),
@@ -211,7 +212,7 @@ class EvolvingClusterer:
         self.capacity_hits = int(data["capacity_hits"])
         self._centres = np.array(data["centres"], dtype=np.float64).reshape(-1, dim)
         self._n = self._centres.shape[0]
-        self._sq_norms = np.einsum("ij,ij->i", self._centres, self._centres)
+        self._sq_norms = np.array(data["sq_norms"], dtype=np.float64).reshape(self._n)
         self._potentials = np.array(data["potentials"], dtype=np.float64).reshape(self._n)
         self._radii = np.array(data["radii"], dtype=np.float64).reshape(self._n)
         self._support = np.array(data["support"], dtype=np.int64).reshape(self._n)

@@ -170,7 +170,7 @@ class LimitsConfig:
     """
 
     max_states: int = 10_000
-    belief_top_k: int = 32
+    belief_top_k: int = 16
     tpm_backend: Literal["lazy", "dense"] = "lazy"
 
     def __post_init__(self) -> None:

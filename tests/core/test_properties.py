@@ -1,0 +1,119 @@
+"""Invariants on random inputs (Hypothesis, seeded and bounded by the project profile)."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from app.core import LimitsConfig, Shield, ShieldConfig, TransitionConfig
+from app.core.belief import recognise, top_k
+from app.core.lazy_tpm import LazyTransitions
+from app.core.tpm import (
+    DenseTransitions,
+    grow_counts,
+    probabilities,
+    update_counts,
+)
+from tests.core.checks import check_all
+from tests.utils import assert_same
+
+finite = st.floats(0.0, 1e6, allow_nan=False, allow_infinity=False)
+observation = st.tuples(st.floats(0, 32), st.floats(0, 210), st.floats(0, 32))
+step = st.tuples(observation, st.floats(-2.5, 2.5), st.booleans(),
+                 st.sampled_from([None, "collision", "large_distance"]))
+streams = st.lists(step, min_size=1, max_size=60)
+
+
+def feed(shield: Shield, steps: list) -> list:  # type: ignore[type-arg]
+    out = []
+    for z, a, done, event in steps:
+        d = shield.step(list(z), None if done else a, event=event, done=done)
+        out.append((d.action, d.reason, d.state, d.n_states, d.threshold))
+    return out
+
+
+@given(arrays(np.float64, st.integers(1, 40), elements=finite), st.integers(1, 50),
+       st.floats(1e-4, 10.0))
+def test_beliefs_sum_to_one(d2: np.ndarray, k: int, var: float) -> None:
+    belief = recognise(d2, np.full(d2.shape, var), k)
+    assert np.isclose(belief.prob.sum(), 1.0)
+    assert np.all(belief.prob >= 0) and belief.index.size <= k
+    assert np.all(np.diff(belief.index) > 0)
+
+
+ops = st.lists(
+    st.one_of(st.just("grow"),
+              st.tuples(st.integers(0, 2), st.integers(0, 10**6), st.integers(0, 10**6))),
+    min_size=1, max_size=40,
+)
+
+
+@given(ops, st.sampled_from(["prior", "zero_uniform", "zero_identity"]),
+       st.floats(0.001, 0.5))
+def test_tpm_rows_stay_distributions_and_forms_agree(ops_list: list, mode: str,
+                                                     lr: float) -> None:  # type: ignore[type-arg]
+    cfg = TransitionConfig(learning_rate=lr, expansion=mode)  # type: ignore[arg-type]
+    lazy, dense = LazyTransitions(3, cfg, 100), DenseTransitions(3, cfg)
+    F, F_o = [np.zeros((0, 0))] * 3, [np.zeros(0)] * 3
+    for op in ["grow", *ops_list]:
+        if op == "grow":
+            lazy.add_state()
+            dense.add_state()
+            F = [grow_counts(f, fo, cfg.prior)[0] for f, fo in zip(F, F_o, strict=True)]
+            F_o = [f.sum(axis=1) for f in F]
+            continue
+        a, s1, s2 = op
+        n = lazy.n_states
+        tau = top_k(np.random.default_rng(s1).random(n), 4)
+        gamma = top_k(np.random.default_rng(s2).random(n), 4)
+        lazy.learn_one(tau, a, gamma)
+        dense.learn_one(tau, a, gamma)
+        F[a], F_o[a] = update_counts(F[a], F_o[a], tau.dense(n), gamma.dense(n), lr)
+    for a in range(3):
+        P = lazy.matrix(a)
+        assert np.all(P >= 0) and np.allclose(P.sum(axis=1), 1.0)
+        np.testing.assert_allclose(P, dense.matrix(a), atol=1e-12)
+        if mode == "prior":
+            np.testing.assert_allclose(probabilities(F[a], F_o[a]), P, atol=1e-12)
+
+
+@given(streams)
+def test_invariants_hold_on_any_stream(steps: list) -> None:  # type: ignore[type-arg]
+    shield = Shield(ShieldConfig(limits=LimitsConfig(belief_top_k=4)))
+    sizes = []
+    for z, a, done, event in steps:
+        shield.step(list(z), None if done else a, event=event, done=done)
+        sizes.append(shield.n_states)
+        check_all(shield)
+    assert sizes == sorted(sizes)
+
+
+@given(streams, streams)
+def test_snapshot_restore_gives_the_same_decisions(first: list, then: list) -> None:  # type: ignore[type-arg]
+    shield = Shield(ShieldConfig())
+    feed(shield, first)
+    restored = Shield.from_snapshot(shield.snapshot())
+    assert feed(restored, then) == feed(shield, then)
+    assert_same(restored.snapshot(), shield.snapshot())
+
+
+@given(streams, st.integers(0, 2**32))
+def test_same_seed_same_model(steps: list, seed: int) -> None:  # type: ignore[type-arg]
+    config = ShieldConfig.from_dict({"reviser": {"seed": seed, "activate_after_episodes": 0}})
+    a, b = Shield(config), Shield(config)
+    assert feed(a, steps) == feed(b, steps)
+    assert_same(a.snapshot(), b.snapshot())
+
+
+@given(streams, observation, st.floats(-2, 2))
+def test_learn_false_and_inputs_are_left_untouched(steps: list, z: tuple, a: float) -> None:  # type: ignore[type-arg]
+    shield = Shield()
+    feed(shield, steps)
+    before = shield.snapshot()
+    obs = np.array(z)
+    shield.step(obs, a, learn=False)
+    assert_same(shield.snapshot(), before)
+    shield.step(obs, a)
+    np.testing.assert_array_equal(obs, np.array(z))  # the caller's array is not mutated

@@ -1,0 +1,224 @@
+"""Every switch of spec/efsm.md §16 changes behaviour where it should: one test each."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from app.core import (
+    ClusteringConfig,
+    LimitsConfig,
+    ReviserConfig,
+    Shield,
+    ShieldConfig,
+    TransitionConfig,
+)
+from app.core.belief import Belief
+from app.core.clustering import EvolvingClusterer
+from app.core.lazy_tpm import LazyTransitions
+from app.core.reviser import noise_std, predict_ahead
+from tests.utils import cliff_config
+
+
+def one_hot(i: int) -> Belief:
+    return Belief(np.array([i]), np.array([1.0]))
+
+
+def shield_with(**sections: object) -> Shield:
+    return Shield(dataclasses.replace(cliff_config(), **sections))
+
+
+def chain_model(n: int = 2) -> LazyTransitions:
+    """Action 0 always leads from state 0 to state 1."""
+    model = LazyTransitions(2, TransitionConfig(learning_rate=0.5), 10)
+    for _ in range(n):
+        model.add_state()
+    for _ in range(20):
+        model.learn_one(one_hot(0), 0, one_hot(1))
+    return model
+
+
+def test_a1_transpose_propagates_the_belief_along_rows() -> None:
+    model = chain_model()
+    fixed = predict_ahead(model, one_hot(0), 0, ReviserConfig(transpose=True), 2, 8)
+    literal = predict_ahead(model, one_hot(0), 0, ReviserConfig(transpose=False), 2, 8)
+    assert fixed == pytest.approx([0.0, 1.0], abs=1e-5)  # from state 0 we go to state 1
+    assert fixed.sum() == pytest.approx(1.0)
+    assert literal.sum() != pytest.approx(1.0)  # P p: a column, not a distribution
+
+
+def test_a2_ets_plus_makes_a_state_for_a_novel_outlier_and_ets2004_does_not() -> None:
+    stream = [0.0, 0.02, 0.04, 1.0]
+    counts = {}
+    for rule in ("ets_plus", "ets2004"):
+        c = EvolvingClusterer(ClusteringConfig(creation_rule=rule), 1, 10)  # type: ignore[arg-type]
+        for z in stream:
+            c.learn_one(np.array([z]))
+        counts[rule] = c.n_states
+    assert counts == {"ets_plus": 2, "ets2004": 1}
+
+
+def test_a3_pad_learns_the_transition_into_a_brand_new_state() -> None:
+    rows = {}
+    for mode in ("skip", "pad"):
+        shield = shield_with(transitions=TransitionConfig(on_new_state=mode))  # type: ignore[arg-type]
+        shield.step([0.0], 0.5)
+        shield.step([0.0], 0.5)
+        assert shield.step([1.0], 0.5).new_state
+        rows[mode] = shield.transitions.matrix(12)[0]
+    # skip: state 1 holds only the padding of the expansion, eps / (F_o,0 + eps), after one
+    # 0 -> 0 update: F_o,0 = (1 - phi) eps + phi
+    f_o = 0.99 * 1e-3 + 0.01
+    assert rows["skip"][1] == pytest.approx(1e-3 / (f_o + 1e-3))
+    assert rows["pad"][1] > rows["skip"][1] + 0.005  # pad: 0 -> 1 was learned too
+
+
+def test_a4_sticky_flags_survive_a_later_uneventful_visit() -> None:
+    flags = {}
+    for mode in ("sticky", "overwrite"):
+        shield = shield_with(reviser=ReviserConfig(flags=mode))  # type: ignore[arg-type]
+        shield.step([0.9], None, event="collision", done=True)
+        shield.step([0.9], 0.0)
+        flags[mode] = int(shield.flags.flags[0])
+    assert flags == {"sticky": 1, "overwrite": 0}
+
+
+def diffuse_prediction_shield(rule: str) -> Shield:
+    """State 0 favourable, state 1 flagged; untried actions predict 50/50."""
+    shield = shield_with(reviser=ReviserConfig(inspect=rule, activate_after_episodes=0))  # type: ignore[arg-type]
+    shield.step([0.0], 0.0)
+    shield.step([0.0], 0.0)
+    shield.step([1.0], None, event="collision", done=True)
+    return shield
+
+
+def test_a5_any_inspects_every_likely_state_and_first_index_only_the_first() -> None:
+    assert diffuse_prediction_shield("any").step([0.0], 1.5).reason == "revised_safety"
+    assert diffuse_prediction_shield("first_index").step([0.0], 1.5).reason == "pass"
+
+
+def test_a6_literal_search_runs_below_the_hardest_braking() -> None:
+    # a one-state model flagged for collision: every action is predicted to collide
+    actions = {}
+    for mode in ("fixed", "literal"):
+        shield = shield_with(reviser=ReviserConfig(  # type: ignore[arg-type]
+            search=mode, activate_after_episodes=0, noise="std", noise_k=1e9))
+        for _ in range(4):  # four episodes: the noise std is 2 / 4e9, negligible
+            shield.step([1.0], None, event="collision", done=True)
+        decision = shield.step([1.0], 1.0)
+        assert [c.bin for c in decision.candidates] == list(range(14, -1, -1))
+        actions[mode] = decision.action
+    assert actions["fixed"] == pytest.approx(-1.9)  # bin 0, the hardest braking
+    assert actions["literal"] == -2.0  # bin "-1" decodes to -2.1 and is clipped
+
+
+def test_a7_noise_is_a_variance_or_a_standard_deviation() -> None:
+    assert noise_std(ReviserConfig(noise="variance"), 2.0, 1) == pytest.approx(2.0**0.5)
+    assert noise_std(ReviserConfig(noise="std"), 2.0, 1) == pytest.approx(2.0)
+
+
+def test_a8_the_transition_is_learned_under_the_executed_or_the_proposed_action() -> None:
+    changed = {}
+    for source in ("executed", "proposed"):
+        shield = shield_with(transitions=TransitionConfig(action_source=source))  # type: ignore[arg-type]
+        shield.step([0.5], 0.0)
+        state = shield.streams["0"]
+        state.applied_bin, state.proposed_bin = 3, 17  # the reviser changed bin 17 into bin 3
+        before = [shield.transitions.matrix(a).copy() for a in range(20)]
+        shield.step([0.5], 0.0)
+        changed[source] = [a for a in range(20)
+                           if not np.array_equal(before[a], shield.transitions.matrix(a))]
+    assert changed == {"executed": [3], "proposed": [17]}
+
+
+def test_a9_spread_definitions_differ() -> None:
+    variances = {}
+    for spread in ("radius", "member_variance", "ets2004"):
+        c = EvolvingClusterer(ClusteringConfig(spread=spread), 1, 10)  # type: ignore[arg-type]
+        for z in (0.0, 0.1, 0.05):  # 0.1 joins state 0, 0.05 then moves it
+            c.learn_one(np.array([z]))
+        variances[spread] = float(c.variances()[0])
+    assert variances == pytest.approx({
+        "radius": (0.7 * 0.3 + 0.3 * np.sqrt(0.01 / 2)) ** 2,  # r^2 after one assignment
+        "member_variance": 0.01 / 2,  # scatter / N
+        "ets2004": 0.3**2 / 4,  # eTS-2004 membership exp(-4 d^2 / r^2)
+    })
+
+
+@pytest.mark.parametrize(
+    ("mode", "new_column", "new_row"),
+    [("prior", "positive", [1 / 3] * 3), ("zero_uniform", "zero", [1 / 3] * 3),
+     ("zero_identity", "zero", [0.0, 0.0, 1.0])],
+)
+def test_a10_expansion_values(mode: str, new_column: str, new_row: list[float]) -> None:
+    model = LazyTransitions(1, TransitionConfig(expansion=mode), 10)  # type: ignore[arg-type]
+    for _ in range(2):
+        model.add_state()
+    model.learn_one(one_hot(0), 0, one_hot(1))
+    model.add_state()
+    P = model.matrix(0)
+    assert (P[0, 2] > 0) == (new_column == "positive")
+    assert P[2] == pytest.approx(new_row)
+
+
+def test_a11_single_product_ignores_the_horizon_beyond_two_steps() -> None:
+    model = chain_model(3)
+    model.learn_one(one_hot(1), 1, one_hot(2))
+    preds = {
+        (mode, k): predict_ahead(model, one_hot(0), 0, ReviserConfig(multi_step=mode, horizon=k),
+                                 2, 8)
+        for mode in ("iterate", "single") for k in (2, 3)
+    }
+    np.testing.assert_array_equal(preds["iterate", 2], preds["single", 2])
+    np.testing.assert_array_equal(preds["single", 2], preds["single", 3])
+    assert not np.allclose(preds["iterate", 3], preds["single", 3])
+
+
+def test_a13_across_episodes_learns_the_reset_transition() -> None:
+    changed = {}
+    for across in (False, True):
+        shield = shield_with(transitions=TransitionConfig(across_episodes=across))
+        shield.step([0.2], 1.5)
+        shield.step([0.2], None, done=True)
+        before = shield.transitions.matrix(17).copy()
+        shield.step([0.2], 0.0)
+        changed[across] = not np.array_equal(before, shield.transitions.matrix(17))
+    assert changed == {False: False, True: True}
+
+
+def test_a16_reset_forgets_what_a_moved_state_had_learned() -> None:
+    rows = {}
+    for mode in ("keep", "reset"):
+        shield = shield_with(transitions=TransitionConfig(on_replace=mode))  # type: ignore[arg-type]
+        shield.step([1.0], 0.0)
+        shield.step([1.0], 0.0)
+        assert shield.step([0.0], -1.5).new_state  # state 1, left under bin 2 next
+        shield.step([0.02], 1.5)  # state 1 moves; learns 1 -> 1 under bin 2
+        shield.step([0.04], 1.5)  # state 1 moves again
+        assert shield.clusterer.centres[1, 0] == pytest.approx(0.04)
+        rows[mode] = shield.transitions.matrix(2)[1]
+    assert rows["keep"][1] > 0.9
+    assert rows["reset"] == pytest.approx([0.5, 0.5])
+
+
+def test_a16_reset_needs_the_lazy_backend() -> None:
+    with pytest.raises(ValueError):
+        Shield(ShieldConfig(transitions=TransitionConfig(on_replace="reset"),
+                            limits=LimitsConfig(tpm_backend="dense")))
+
+
+def test_paper_literal_preset_takes_the_literal_reading_everywhere() -> None:
+    literal = ShieldConfig.paper_literal()
+    assert literal.reviser.transpose is False
+    assert literal.reviser.inspect == "first_index"
+    assert literal.reviser.search == "literal"
+    assert literal.reviser.multi_step == "single"
+    assert literal.reviser.flags == "overwrite"
+    assert literal.clustering.creation_rule == "ets2004"
+    assert literal.transitions.action_source == "proposed"
+    assert literal.transitions.across_episodes is True
+    # the paper's values stay
+    assert (literal.clustering.rho, literal.clustering.epsilon) == (0.7, 0.3)
+    assert literal.reviser.activate_after_episodes == 50
