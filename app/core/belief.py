@@ -8,6 +8,7 @@ renormalised, which is exact when k is at least the number of states.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,11 +49,18 @@ def top_k(weights: FloatArray, k: int) -> Belief:
     return Belief(index.astype(np.int64), prob / prob.sum())
 
 
+# States whose weight is below machine epsilon of the largest cannot change the normalised
+# belief of the others; skipping them keeps the top-k selection off the whole state set.
+NEGLIGIBLE_LOGIT = math.log(np.finfo(np.float64).eps)
+
+
 def recognise(sq_distances: FloatArray, variances: FloatArray, k: int) -> Belief:
     """Eq. 1 as a numerically stable softmax of ``-d_i^2 / var_i``, truncated to the top k."""
     logits = -sq_distances / variances
     if logits.shape[0] > k:
-        index = np.sort(np.argpartition(-logits, k - 1)[:k])
+        index = np.flatnonzero(logits >= logits.max() + NEGLIGIBLE_LOGIT)
+        if index.size > k:
+            index = np.sort(index[np.argpartition(-logits[index], k - 1)[:k]])
     else:
         index = np.arange(logits.shape[0])
     chosen = logits[index]

@@ -61,6 +61,7 @@ class EvolvingClusterer:
         self._radii = np.zeros(0)
         self._support = np.zeros(0, dtype=np.int64)
         self._scatter = np.zeros(0)
+        self._variances = np.zeros(0)
 
     @property
     def n_states(self) -> int:
@@ -90,16 +91,20 @@ class EvolvingClusterer:
         return self._support[: self._n].copy()
 
     def variances(self) -> FloatArray:
-        """var(s^i) of Eq. 1 per state (spec §3, switch A9)."""
+        """var(s^i) of Eq. 1 per state (spec §3, switch A9), read-only view."""
+        view = self._variances[: self._n]
+        view.flags.writeable = False
+        return view
+
+    def _refresh_variance(self, i: int) -> None:
         cfg = self.config
-        n = self._n
         if cfg.spread == "radius":  # [REC] r_i^2 with a floor
-            var = self._radii[:n] ** 2
+            var = self._radii[i] ** 2
         elif cfg.spread == "member_variance":  # mean squared member distance, floored
-            var = self._scatter[:n] / self._support[:n]
+            var = self._scatter[i] / self._support[i]
         else:  # eTS-2004 membership exp(-4 d^2 / r^2): var = r^2 / 4
-            var = np.full(n, cfg.epsilon**2 / 4.0)
-        return np.maximum(var, cfg.min_variance)
+            var = cfg.epsilon**2 / 4.0
+        self._variances[i] = max(var, cfg.min_variance)
 
     def sq_distances(self, z: FloatArray) -> FloatArray:
         """Squared distances from z to every centre: ||c||^2 - 2 c.z + ||z||^2, clipped at 0."""
@@ -163,6 +168,7 @@ class EvolvingClusterer:
         self._radii = ensure_capacity(self._radii, n + 1, limit)
         self._support = ensure_capacity(self._support, n + 1, limit)
         self._scatter = ensure_capacity(self._scatter, n + 1, limit)
+        self._variances = ensure_capacity(self._variances, n + 1, limit)
         self._centres[n] = z
         self._sq_norms[n] = float(z @ z)
         self._potentials[n] = potential
@@ -170,6 +176,7 @@ class EvolvingClusterer:
         self._support[n] = 1
         self._scatter[n] = 0.0
         self._n = n + 1
+        self._refresh_variance(n)
         return n
 
     def _assign(self, index: int, sq_distance: float) -> None:
@@ -179,6 +186,7 @@ class EvolvingClusterer:
         self._scatter[index] += sq_distance
         local = np.sqrt(self._scatter[index] / self._support[index])
         self._radii[index] = rho * self._radii[index] + (1.0 - rho) * local
+        self._refresh_variance(index)
 
     def _accumulate(self, z: FloatArray) -> None:
         self.beta += z
@@ -217,4 +225,7 @@ class EvolvingClusterer:
         self._radii = np.array(data["radii"], dtype=np.float64).reshape(self._n)
         self._support = np.array(data["support"], dtype=np.int64).reshape(self._n)
         self._scatter = np.array(data["scatter"], dtype=np.float64).reshape(self._n)
+        self._variances = np.zeros(self._n)
+        for i in range(self._n):
+            self._refresh_variance(i)
         return self

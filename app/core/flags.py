@@ -13,6 +13,7 @@ import numpy.typing as npt
 
 from app.core._arrays import ensure_capacity
 
+IntArray = npt.NDArray[np.int64]
 NO_FLAG = 0
 
 
@@ -25,6 +26,7 @@ class StateFlags:
         self._n = 0
         self._flags = np.zeros(0, dtype=np.int64)
         self._visits = np.zeros(0, dtype=np.int64)
+        self._flagged: tuple[IntArray, IntArray] | None = None
 
     @property
     def flags(self) -> npt.NDArray[np.int64]:
@@ -38,9 +40,12 @@ class StateFlags:
         """How often each state was the recognised one."""
         return self._visits[: self._n].copy()
 
-    def any_flagged(self) -> bool:
-        """True once some state carries an unfavourable flag."""
-        return bool(np.any(self._flags[: self._n]))
+    def flagged(self) -> tuple[IntArray, IntArray]:
+        """The flagged states (ascending) and their flags: the reviser reads only these."""
+        if self._flagged is None:
+            index = np.flatnonzero(self._flags[: self._n])
+            self._flagged = (index, self._flags[index])
+        return self._flagged
 
     def add_state(self) -> None:
         """A new state starts favourable and unvisited."""
@@ -56,10 +61,11 @@ class StateFlags:
         """
         self._visits[state] += 1
         new = NO_FLAG if criterion is None else criterion + 1
-        if self.mode == "overwrite":
+        old = self._flags[state]
+        if self.mode == "overwrite" or (new != NO_FLAG and (old == NO_FLAG or new < old)):
             self._flags[state] = new
-        elif new != NO_FLAG and (self._flags[state] == NO_FLAG or new < self._flags[state]):
-            self._flags[state] = new
+            if new != old:
+                self._flagged = None
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state."""

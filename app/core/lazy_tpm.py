@@ -29,6 +29,7 @@ from app.core.config import TransitionConfig
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+ColArray = npt.NDArray[np.int32]
 
 
 class LazyTransitions:
@@ -47,9 +48,10 @@ class LazyTransitions:
         self._offset = np.zeros((q, 0))  # learned row i is exp(offset) * vals
         self._row_sum = np.zeros((q, 0))  # sum of vals per row
         self._nnz = np.zeros((q, 0), dtype=np.int64)
-        self._cols: list[IntArray] = [np.zeros((0, 0), dtype=np.int64) for _ in range(q)]
+        self._cols: list[ColArray] = [np.zeros((0, 0), dtype=np.int32) for _ in range(q)]
         self._vals: list[FloatArray] = [np.zeros((0, 0)) for _ in range(q)]
         self._log_prior = math.log(config.prior)
+        self._scratch = np.zeros((0, 0), dtype=np.int64)  # see _find_slots
 
     @property
     def n_states(self) -> int:
@@ -101,11 +103,8 @@ class LazyTransitions:
         width = self._vals[a].shape[1]
         if width:
             self._vals[a][rows] *= factor[:, None]
-            stored = self._cols[a][rows]
-            valid = np.arange(width)[None, :] < nnz[:, None]
-            match = (stored[:, :, None] == cols[None, None, :]) & valid[:, :, None]
-            found = match.any(axis=1)
-            slot = match.argmax(axis=1)
+            slot = self._find_slots(a, rows, nnz, cols)
+            found = slot >= 0
             fr, fc = np.nonzero(found)
             self._vals[a][rows[fr], slot[fr, fc]] += contrib[fr, fc]
         else:
@@ -115,7 +114,7 @@ class LazyTransitions:
         added = missing.sum(axis=1)
         needed = int((nnz + added).max(initial=0))
         if needed > width:
-            new_width = max(needed, 2 * width, 8)
+            new_width = max(needed, width + width // 4, 8)  # rows widen slowly: grow by 25%
             self._cols[a] = ensure_capacity(self._cols[a], new_width, new_width, axis=1)
             self._vals[a] = ensure_capacity(self._vals[a], new_width, new_width, axis=1)
         mr, mc = np.nonzero(missing)
@@ -123,6 +122,22 @@ class LazyTransitions:
         self._cols[a][rows[mr], slot_new] = cols[mc]
         self._vals[a][rows[mr], slot_new] = contrib[mr, mc]
         self._nnz[a, rows] = nnz + added
+
+    def _find_slots(self, a: int, rows: IntArray, nnz: IntArray, cols: IntArray) -> IntArray:
+        """Slot of each (row, col) pair in the learned rows, -1 where absent.
+
+        A sparse accumulator: a scratch map column -> slot + 1 is filled for the touched rows
+        only and cleared again, so the lookup costs O(k W + k^2) whatever n is.
+        """
+        self._scratch = ensure_capacity(self._scratch, rows.size, rows.size)
+        self._scratch = ensure_capacity(self._scratch, self._n, self.max_states, axis=1)
+        width = self._cols[a].shape[1]
+        r, s = np.nonzero(np.arange(width)[None, :] < nnz[:, None])
+        stored = self._cols[a][rows[r], s]
+        self._scratch[r, stored] = s + 1
+        slot = self._scratch[: rows.size][:, cols] - 1
+        self._scratch[r, stored] = 0
+        return slot
 
     def _log_norm(self, a: int, rows: IntArray) -> FloatArray:
         """``log(F_o^a(i) / D_a)`` for the given rows: padding mass (+) learned mass."""
@@ -153,19 +168,19 @@ class LazyTransitions:
         vals = self._vals[a][rows] * learned[:, None]
         cols = self._cols[a][rows].ravel()
         pred = np.bincount(cols, weights=vals.ravel(), minlength=n).astype(np.float64)
-        before = np.searchsorted(rows, np.arange(n))  # belief rows with index < j
+        # columns j fall into k + 1 segments by how many belief rows lie below them
+        segment = np.diff(np.concatenate(([0], rows + 1, [n])))
         mode = self.config.expansion
         if mode == "prior":
             # sum_i c_i pad(max(i, j)) = pad(j) sum_{i<j} c_i + sum_{i>=j} c_i pad(i)
             c = p * np.exp(self._log_prior + self._created[a, n - 1] - log_norm)
             below = np.concatenate(([0.0], np.cumsum(c)))
-            weighted = np.concatenate(([0.0], np.cumsum(c * self._pad[a, rows])))
-            pred += self._pad[a, :n] * below[before] + (weighted[-1] - weighted[before])
+            weighted = np.cumsum(np.append(c * self._pad[a, rows], 0.0)[::-1])[::-1]
+            pred += self._pad[a, :n] * np.repeat(below, segment) + np.repeat(weighted, segment)
         else:
             c = p * np.exp(self._log_prior + self._created[a, rows] - log_norm)
             if mode == "zero_uniform":  # row i spreads over columns j <= i
-                cum = np.concatenate(([0.0], np.cumsum(c)))
-                pred += cum[-1] - cum[before]
+                pred += np.repeat(np.cumsum(np.append(c, 0.0)[::-1])[::-1], segment)
             else:
                 pred[rows] += c
         return pred
@@ -223,8 +238,10 @@ class LazyTransitions:
 
     def nbytes(self) -> int:
         """Memory held by the matrices."""
-        arrays = [self._created, self._pad, self._pad_tail, self._offset, self._row_sum,
-                  self._nnz, *self._cols, *self._vals]
+        arrays: list[npt.NDArray[Any]] = [
+            self._created, self._pad, self._pad_tail, self._offset, self._row_sum, self._nnz,
+            self._scratch, *self._cols, *self._vals,
+        ]
         return sum(int(x.nbytes) for x in arrays)
 
     def snapshot(self) -> dict[str, Any]:
@@ -275,9 +292,9 @@ class LazyTransitions:
             self._offset[a] = np.array(entry["offset"], dtype=np.float64).reshape(n)
             self._row_sum[a] = np.array(entry["row_sum"], dtype=np.float64).reshape(n)
             valid = np.arange(width)[None, :] < nnz[:, None]
-            self._cols[a] = np.zeros((n, width), dtype=np.int64)
+            self._cols[a] = np.zeros((n, width), dtype=np.int32)
             self._vals[a] = np.zeros((n, width))
-            self._cols[a][valid] = np.array(entry["cols"], dtype=np.int64)
+            self._cols[a][valid] = np.array(entry["cols"], dtype=np.int32)
             self._vals[a][valid] = np.array(entry["vals"], dtype=np.float64)
         self._refresh_pads()
         return self

@@ -7,6 +7,7 @@ meet, which is also its priority (0 = highest).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from typing import Literal
@@ -19,6 +20,7 @@ from app.core.config import ReviserConfig
 from app.core.tpm import TransitionModel
 
 FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
 OK = -1
 
 
@@ -28,34 +30,48 @@ def variant_threshold(pred: FloatArray) -> float:
     A peaked prediction (E < 2) gives the maximum; a diffuse one a small threshold, so that
     more states count as likely.
     """
-    x = np.sort(pred)[::-1]
-    expected_rank = float(np.arange(1, x.size + 1) @ x)
-    index = min(max(int(math.floor(expected_rank)), 1), x.size)  # guard against round-off
-    return float(x[index - 1])
+    # ascending sort (predictions are a few sorted runs: timsort wins); X(r) = s[n - r], so
+    # E = sum_r r X(r) = sum_i (n - i) s[i]
+    s = np.sort(pred, kind="stable")
+    n = s.size
+    expected_rank = float(_descending_ranks(n) @ s)
+    index = min(max(int(math.floor(expected_rank)), 1), n)  # guard against round-off
+    return float(s[n - index])
+
+
+@functools.lru_cache(maxsize=4)
+def _descending_ranks(n: int) -> FloatArray:
+    """[n, n-1, ..., 1]: the rank in descending order of each ascending position."""
+    ranks = np.arange(n, 0, -1, dtype=np.float64)
+    ranks.flags.writeable = False
+    return ranks
 
 
 def inspect(
     pred: FloatArray,
     threshold: float,
-    flags: npt.NDArray[np.int64],
+    flagged: tuple[IntArray, IntArray],
     rule: Literal["any", "first_index"],
 ) -> int:
     """Alg. 3: the criterion an action is predicted to meet, or ``OK``.
 
-    ``any`` [REC]: the highest-priority flag among all states at or above the threshold.
-    ``first_index``: the literal loop, which answers with the first such state by index.
+    ``flagged`` holds the flagged states (ascending) and their flags. ``any`` [REC]: the
+    highest-priority flag among all states at or above the threshold. ``first_index``: the
+    literal loop, which answers with the first such state by index.
     """
-    likely = np.flatnonzero(pred >= threshold)
-    likely_flags = flags[likely]
+    index, flags = flagged
     if rule == "first_index":
-        return int(likely_flags[0]) - 1 if likely.size else OK
-    unfavourable = likely_flags[likely_flags > 0]
-    return int(unfavourable.min()) - 1 if unfavourable.size else OK
+        first = int(np.argmax(pred >= threshold))  # one exists: threshold <= max(pred)
+        at = int(np.searchsorted(index, first))
+        return int(flags[at]) - 1 if at < index.size and index[at] == first else OK
+    likely = flags[pred[index] >= threshold]
+    return int(likely.min()) - 1 if likely.size else OK
 
 
-def risk(pred: FloatArray, flags: npt.NDArray[np.int64], n_criteria: int) -> FloatArray:
+def risk(pred: FloatArray, flagged: tuple[IntArray, IntArray], n_criteria: int) -> FloatArray:
     """Predicted probability mass on the states of each criterion."""
-    mass = np.bincount(flags, weights=pred, minlength=n_criteria + 1)[1:]
+    index, flags = flagged
+    mass = np.bincount(flags, weights=pred[index], minlength=n_criteria + 1)[1:]
     return np.asarray(mass, dtype=np.float64)
 
 

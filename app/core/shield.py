@@ -333,7 +333,7 @@ class Shield:
         names = [c.name for c in self.config.criteria]
         if pred is None:
             return dict.fromkeys(names, 0.0)
-        mass = reviser.risk(pred, np.asarray(self.flags.flags), len(names))
+        mass = reviser.risk(pred, self.flags.flagged(), len(names))
         return {name: float(m) for name, m in zip(names, mass, strict=True)}
 
     def _decide(
@@ -349,21 +349,22 @@ class Shield:
         cfg = self.config
         proposed = step.action
         assert proposed is not None
-        flags = np.asarray(self.flags.flags)
+        flagged = self.flags.flagged()
         q = cfg.action.n_bins
 
         def assess(action_bin: int) -> tuple[int, float, FloatArray]:
             pred = reviser.predict_ahead(self.transitions, belief, action_bin, cfg.reviser, q,
                                          cfg.limits.belief_top_k)
             threshold = reviser.variant_threshold(pred)
-            return reviser.inspect(pred, threshold, flags, cfg.reviser.inspect), threshold, pred
+            verdict = reviser.inspect(pred, threshold, flagged, cfg.reviser.inspect)
+            return verdict, threshold, pred
 
         common = dict(
             proposed=proposed, state=recognised, n_states=self.n_states, new_state=is_new,
             episode=self.counters.episodes, step=index,
             model_version=self.counters.model_version, stream=step.stream, shadow=step.shadow,
         )
-        if not self.flags.any_flagged():
+        if flagged[0].size == 0:
             return Decision(action=proposed, revised=False, reason="cold_start", verdict="ok",
                             risk=self._risk(None), threshold=None, candidates=(),
                             suggested=proposed, **common)  # type: ignore[arg-type]

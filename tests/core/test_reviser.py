@@ -38,9 +38,14 @@ def test_alg1_threshold_never_exceeds_the_maximum() -> None:
         assert variant_threshold(p) <= p.max()
 
 
+def flagged(flags: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    index = np.flatnonzero(flags)
+    return index, np.array(flags)[index]
+
+
 def test_alg3_any_sees_an_unfavourable_state_that_the_literal_loop_misses() -> None:
     pred = np.full(4, 0.25)  # diffuse: all four states pass the threshold
-    flags = np.array([0, 2, 1, 0])  # state 1 large distance, state 2 collision
+    flags = flagged([0, 2, 1, 0])  # state 1 large distance, state 2 collision
     threshold = variant_threshold(pred)
     assert inspect(pred, threshold, flags, "any") == COLLISION  # safety first
     assert inspect(pred, threshold, flags, "first_index") == OK  # state 0 is favourable
@@ -48,14 +53,13 @@ def test_alg3_any_sees_an_unfavourable_state_that_the_literal_loop_misses() -> N
 
 def test_alg3_peaked_prediction_only_looks_at_the_likely_state() -> None:
     pred = np.array([0.9, 0.05, 0.05])
-    flags = np.array([0, 1, 1])
-    assert inspect(pred, variant_threshold(pred), flags, "any") == OK
-    flags = np.array([2, 1, 0])
-    assert inspect(pred, variant_threshold(pred), flags, "any") == LARGE
+    assert inspect(pred, variant_threshold(pred), flagged([0, 1, 1]), "any") == OK
+    assert inspect(pred, variant_threshold(pred), flagged([2, 1, 0]), "any") == LARGE
+    assert inspect(pred, variant_threshold(pred), flagged([2, 1, 0]), "first_index") == LARGE
 
 
 def test_risk_is_the_predicted_mass_per_criterion() -> None:
-    mass = risk(np.array([0.5, 0.2, 0.3]), np.array([1, 0, 1]), 2)
+    mass = risk(np.array([0.5, 0.2, 0.3]), flagged([1, 0, 1]), 2)
     assert mass == pytest.approx([0.8, 0.0])
 
 
