@@ -1,6 +1,90 @@
-"""Hypothesis profile: a modest, derandomised example budget keeps the suite fast and stable."""
+"""Shared fixtures: an in-process app client and a real server on 127.0.0.1."""
 
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import pytest
+from fastapi.testclient import TestClient
 from hypothesis import settings
+
+from app.main import create_app
+from app.settings import Settings
 
 settings.register_profile("project", max_examples=40, derandomize=True, deadline=None)
 settings.load_profile("project")
+
+
+@pytest.fixture
+def client() -> Iterator[TestClient]:
+    """The app in memory, lifespan included."""
+    with TestClient(create_app(Settings())) as c:
+        yield c
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+@dataclass
+class Server:
+    """A shield service in its own process."""
+
+    url: str
+    data_dir: Path
+    process: subprocess.Popen[bytes]
+    log: Path
+
+    def kill(self) -> None:
+        self.process.send_signal(signal.SIGKILL)
+        self.process.wait(10)
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+            try:
+                self.process.wait(10)
+            except subprocess.TimeoutExpired:
+                self.kill()
+
+
+def start_server(data_dir: Path, *args: str, env: dict[str, str] | None = None) -> Server:
+    """``python -m app serve`` on a free port; returns once /readyz answers 200."""
+    port = free_port()
+    log = data_dir.parent / f"server-{port}.log"
+    command = [sys.executable, "-m", "app", "serve", "--host", "127.0.0.1", "--port", str(port),
+               "--data-dir", str(data_dir), *args]
+    process = subprocess.Popen(command, stdout=open(log, "wb"), stderr=subprocess.STDOUT,
+                               env={**os.environ, **(env or {})})
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            raise RuntimeError(f"server exited: {log.read_text()}")
+        try:
+            if httpx.get(url + "/readyz", timeout=1).status_code == 200:
+                return Server(url, data_dir, process, log)
+        except httpx.TransportError:
+            time.sleep(0.1)
+    process.kill()
+    raise RuntimeError(f"server did not start: {log.read_text()}")
+
+
+@pytest.fixture
+def live_server(tmp_path: Path) -> Iterator[Server]:
+    """A real server with a data directory and fsync=always; stopped after the test."""
+    server = start_server(tmp_path / "data", "--fsync", "always")
+    yield server
+    server.stop()

@@ -215,6 +215,8 @@ class LazyTransitions:
     def matrix(self, action_bin: int) -> FloatArray:
         """The dense n x n matrix of one action (for snapshots and tests)."""
         a, n = action_bin, self._n
+        if n == 0:
+            return np.zeros((0, 0))
         rows = np.arange(n)
         log_norm = self._log_norm(a, rows)
         mode = self.config.expansion
@@ -233,6 +235,8 @@ class LazyTransitions:
     def row_mass(self, action_bin: int) -> FloatArray:
         """``F_o`` of one action: the weighted departure count of every state (Eq. 4)."""
         a = action_bin
+        if self._n == 0:
+            return np.zeros(0)
         mass: FloatArray = np.exp(self._log_decay[a] + self._log_norm(a, np.arange(self._n)))
         return mass
 

@@ -194,3 +194,12 @@ def test_states_view_reports_physical_centres() -> None:
     states = shield.states()
     assert states["centre"][0] == pytest.approx([16.0, 100.0, 8.0])
     assert states["flag"] == [None] and states["visits"].tolist() == [1]
+
+
+def test_an_empty_model_has_empty_views_and_snapshots() -> None:
+    shield = Shield()
+    assert shield.transitions.matrix(0).shape == (0, 0)
+    assert shield.states()["centre"].shape == (0, 3)
+    assert_same(Shield.from_snapshot(shield.snapshot()).snapshot(), shield.snapshot())
+    what_if = shield.step([1.0, 2.0, 3.0], 0.5, learn=False)
+    assert what_if.reason == "cold_start" and shield.n_states == 0

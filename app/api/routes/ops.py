@@ -1,0 +1,32 @@
+"""Health, readiness and Prometheus metrics."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Depends, Request, Response
+from fastapi.responses import JSONResponse
+from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+
+from app.api.deps import RegistryDep, require_token
+
+router = APIRouter(tags=["operations"])
+
+
+@router.get("/healthz")
+def healthz() -> dict[str, str]:
+    """The process is alive (no token needed)."""
+    return {"status": "ok"}
+
+
+@router.get("/readyz")
+def readyz(registry: RegistryDep) -> JSONResponse:
+    """The models are loaded (no token needed)."""
+    ready = registry.ready
+    body = {"status": "ready" if ready else "loading", "models": len(registry.names())}
+    return JSONResponse(body, status_code=200 if ready else 503)
+
+
+@router.get("/metrics", dependencies=[Depends(require_token)])
+def metrics(request: Request) -> Response:
+    """Prometheus text format."""
+    return Response(generate_latest(request.app.state.metrics.registry),
+                    media_type=CONTENT_TYPE_LATEST)

@@ -1,0 +1,85 @@
+"""POST /revise and friends: one step or a batch of steps in, decision records out."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Path, Request, WebSocket
+from fastapi.responses import JSONResponse
+from starlette.concurrency import run_in_threadpool
+
+from app.api.convert import decision_json, to_step
+from app.api.deps import RegistryDep, SettingsDep, require_token
+from app.api.errors import TooLarge
+from app.api.schemas import (
+    BatchRequest,
+    BatchResponse,
+    Decision,
+    ErrorBody,
+    ModelBatchRequest,
+    ReviseRequest,
+)
+from app.core import Decision as CoreDecision
+from app.service.registry import DEFAULT_MODEL, ModelRegistry, Step
+
+ERRORS: dict[int | str, dict[str, object]] = {
+    code: {"model": ErrorBody} for code in (401, 404, 413, 422)
+}
+router = APIRouter(tags=["revise"], dependencies=[Depends(require_token)], responses=ERRORS)
+NamePath = Annotated[str, Path(pattern=r"^[a-z0-9][a-z0-9_-]{0,63}$", description="Model name.")]
+
+
+async def step_one(registry: ModelRegistry, name: str, step: Step) -> CoreDecision:
+    """Run inline when the model is free (one step on the loop), else in the threadpool."""
+    decision = registry.try_step(name, step)
+    if decision is None:
+        decision = await run_in_threadpool(registry.step, name, step)
+    return decision
+
+
+def count(request: Request | WebSocket, name: str, decisions: list[CoreDecision]) -> None:
+    counter = request.app.state.metrics.decisions
+    for d in decisions:
+        counter.labels(name, d.reason).inc()
+
+
+@router.post("/models/{name}/revise", response_model=Decision)
+async def revise_model(name: NamePath, body: ReviseRequest, registry: RegistryDep,
+                       request: Request) -> JSONResponse:
+    """Answer one proposed action of a stream with the decision record."""
+    decision = await step_one(registry, name, to_step(body))
+    count(request, name, [decision])
+    return JSONResponse(decision_json(decision))
+
+
+@router.post("/revise", response_model=Decision)
+async def revise(body: ReviseRequest, registry: RegistryDep, request: Request) -> JSONResponse:
+    """One step of the 'default' model."""
+    return await revise_model(DEFAULT_MODEL, body, registry, request)
+
+
+def check_size(n: int, limit: int) -> None:
+    if n > limit:
+        raise TooLarge(f"a batch holds at most {limit} steps, got {n}", field="steps")
+
+
+@router.post("/models/{name}/revise/batch", response_model=BatchResponse)
+def revise_batch(name: NamePath, body: BatchRequest, registry: RegistryDep,
+                 settings: SettingsDep, request: Request) -> JSONResponse:
+    """Steps of one model, applied in order; one bad step rejects the whole batch."""
+    check_size(len(body.steps), settings.max_batch)
+    decisions = registry.step_batch(name, [to_step(s) for s in body.steps])
+    count(request, name, decisions)
+    return JSONResponse({"decisions": [decision_json(d) for d in decisions]})
+
+
+@router.post("/revise/batch", response_model=BatchResponse)
+def revise_across(body: ModelBatchRequest, registry: RegistryDep, settings: SettingsDep,
+                  request: Request) -> JSONResponse:
+    """Steps across models (each names its model), in order; one bad step rejects them all."""
+    check_size(len(body.steps), settings.max_batch)
+    decisions = registry.step_many([(s.model, to_step(s)) for s in body.steps])
+    assert decisions is not None
+    for s, d in zip(body.steps, decisions, strict=True):
+        count(request, s.model, [d])
+    return JSONResponse({"decisions": [decision_json(d) for d in decisions]})

@@ -1,0 +1,78 @@
+"""WebSocket sessions: each text frame one step, each reply the decision record, in order."""
+
+from __future__ import annotations
+
+import json
+
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from pydantic import ValidationError
+
+from app.api.convert import decision_json, to_step
+from app.api.deps import token_ok
+from app.api.errors import error_body
+from app.api.routes.revise import NamePath, count, step_one
+from app.api.schemas import ReviseRequest
+from app.core import ShieldError
+from app.service.registry import DEFAULT_MODEL, ModelRegistry
+
+router = APIRouter(tags=["stream"])
+POLICY_VIOLATION = 1008
+
+
+def bearer(websocket: WebSocket) -> str | None:
+    """The token from ``Authorization: Bearer`` or, for browsers, the ``token`` query."""
+    header = websocket.headers.get("authorization", "")
+    if header.lower().startswith("bearer "):
+        return header[7:]
+    return websocket.query_params.get("token")
+
+
+@router.websocket("/models/{name}/ws")
+async def model_stream(websocket: WebSocket, name: NamePath) -> None:
+    """A stream of steps for one model over one connection."""
+    app = websocket.app
+    registry: ModelRegistry = app.state.registry
+    if not token_ok(app.state.settings.token, bearer(websocket)):
+        await websocket.close(code=POLICY_VIOLATION, reason="missing or wrong bearer token")
+        return
+    await websocket.accept()
+    try:
+        registry.get(name)
+    except ShieldError as error:
+        await websocket.send_text(json.dumps(error_body(error.code, error.message, "name")))
+        await websocket.close(code=POLICY_VIOLATION)
+        return
+    while True:
+        try:
+            message = await websocket.receive()
+        except WebSocketDisconnect:
+            return
+        if message["type"] == "websocket.disconnect":
+            return
+        text = message.get("text")
+        if text is None:
+            await websocket.send_text(json.dumps(error_body(
+                "unsupported_frame", "send each step as a JSON text frame")))
+            continue
+        await websocket.send_text(await answer(websocket, registry, name, text))
+
+
+async def answer(websocket: WebSocket, registry: ModelRegistry, name: str, text: str) -> str:
+    try:
+        body = ReviseRequest.model_validate_json(text)
+        decision = await step_one(registry, name, to_step(body))
+    except ValidationError as error:
+        first = error.errors()[0]
+        code = "invalid_json" if first["type"] == "json_invalid" else "invalid_body"
+        field = ".".join(str(p) for p in first["loc"]) or None
+        return json.dumps(error_body(code, first["msg"], field))
+    except ShieldError as error:
+        return json.dumps(error_body(error.code, error.message, error.field))
+    count(websocket, name, [decision])
+    return json.dumps(decision_json(decision))
+
+
+@router.websocket("/ws")
+async def default_stream(websocket: WebSocket) -> None:
+    """A stream of steps for the 'default' model."""
+    await model_stream(websocket, DEFAULT_MODEL)

@@ -1,0 +1,156 @@
+"""Request and response bodies of the API, each field described for the OpenAPI schema."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from pydantic import BaseModel, ConfigDict, Field
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=True)]
+ModelName = Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,63}$",
+                                 examples=["default", "run-3"])]
+
+STEP_EXAMPLE: dict[str, Any] = {"observation": [14.2, 38.5, 15.0], "action": 0.8, "stream": "car-1"}
+
+
+class ReviseRequest(BaseModel):
+    """One step of a stream: the observation at t and the action the controller proposes."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [STEP_EXAMPLE]})
+
+    observation: list[FiniteFloat] = Field(
+        min_length=1, max_length=1024,
+        description="z_t in physical units, one number per configured dimension (the car-"
+        "following model: ego speed [m/s], headway [m], lead speed [m/s]).",
+        examples=[[14.2, 38.5, 15.0]],
+    )
+    action: FiniteFloat | None = Field(
+        None, description="The proposed action a_t (m/s²); null only when done is true.",
+        examples=[0.8],
+    )
+    stream: str = Field("0", min_length=1, max_length=128, strict=True,
+                        description="Which stream this step belongs to.", examples=["car-1"])
+    event: str | None = Field(
+        None, strict=True,
+        description="A criterion observed at z_t ('collision', 'large_distance', ...): the "
+        "recognised state is flagged with it.", examples=["collision"],
+    )
+    done: bool = Field(False, strict=True,
+                       description="z_t ends the episode: learn from it, then forget the "
+                       "stream's previous step.")
+    applied_action: FiniteFloat | None = Field(
+        None, description="The action really executed at t-1, when it differs from the one "
+        "returned (e.g. the vehicle clipped it).", examples=[-0.4],
+    )
+    learn: bool = Field(True, strict=True,
+                        description="False: answer without changing the model (what-if).")
+    shadow: bool = Field(False, strict=True,
+                         description="True: learn and report what would be done, but return "
+                         "the proposed action.")
+
+
+class ModelStep(ReviseRequest):
+    """A step that names its model, for batches across models."""
+
+    model: ModelName = Field(description="The model this step feeds.")
+
+
+class BatchRequest(BaseModel):
+    """Steps applied in order; one bad step rejects the whole batch."""
+
+    model_config = ConfigDict(extra="forbid")
+    steps: list[ReviseRequest] = Field(description="The steps, in order.")
+
+
+class ModelBatchRequest(BaseModel):
+    """Steps across models (one per vectorised run, say), applied in order."""
+
+    model_config = ConfigDict(extra="forbid")
+    steps: list[ModelStep] = Field(description="The steps, each naming its model.")
+
+
+class Candidate(BaseModel):
+    """An action the reviser inspected."""
+
+    action: float = Field(description="The bin's midpoint (m/s²).")
+    bin: int = Field(description="The action bin, 0 = hardest braking.")
+    verdict: str = Field(description="'ok' or the criterion predicted for it.")
+
+
+class Decision(BaseModel):
+    """The decision record of one step."""
+
+    action: float | None = Field(description="The action to apply; null when done.")
+    proposed: float | None = Field(description="The proposed action, echoed.")
+    revised: bool = Field(description="Whether the reviser changed (or, in shadow mode, "
+                          "would have changed) the action.")
+    reason: str = Field(description="pass, revised_safety, revised_speed, inactive, "
+                        "cold_start or done.")
+    verdict: str = Field(description="What inspecting the proposed action found.")
+    risk: dict[str, float] = Field(description="Predicted probability mass per criterion.")
+    threshold: float | None = Field(description="Alg. 1's adaptive threshold for the "
+                                    "proposed action; null when nothing was inspected.")
+    candidates: list[Candidate] = Field(description="Actions inspected while revising.")
+    state: int | None = Field(description="The recognised state (argmax belief).")
+    n_states: int = Field(description="States after this step.")
+    new_state: bool = Field(description="This step created a state.")
+    episode: int = Field(description="Finished episodes of the model.")
+    step: int = Field(description="This stream's step within its episode.")
+    model_version: int = Field(description="Increases with every learning step.")
+    stream: str = Field(description="The stream, echoed.")
+    shadow: bool = Field(description="The step ran in shadow mode.")
+    suggested: float | None = Field(description="The action the reviser would return "
+                                    "(equals action unless shadow).")
+
+
+class BatchResponse(BaseModel):
+    """Decisions in the order of the steps."""
+
+    decisions: list[Decision]
+
+
+class ModelCreate(BaseModel):
+    """A new model."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: ModelName = Field(description="Its name.")
+    config: dict[str, Any] = Field(
+        default_factory=dict,
+        description="Overrides of the paper's car-following configuration: observation "
+        "(names, low, high), action (low, high, step, out_of_range), criteria "
+        "([{name, direction}]), clustering (rho, epsilon, creation_rule, spread), "
+        "transitions (learning_rate, prior, on_new_state, expansion, action_source, "
+        "across_episodes, on_replace), reviser (activate_after_episodes, noise_k, noise, "
+        "horizon, transpose, inspect, search, multi_step, flags, seed), limits (max_states, "
+        "belief_top_k, tpm_backend).",
+        examples=[{"clustering": {"epsilon": 0.1}, "reviser": {"seed": 7}}],
+    )
+
+
+class ModelSummary(BaseModel):
+    """A model's counters."""
+
+    name: str
+    n_states: int
+    steps: int = Field(description="Learning steps so far.")
+    episodes: int = Field(description="Finished episodes.")
+    model_version: int
+    interventions: dict[str, int] = Field(description="Revised actions per criterion.")
+    streams: int = Field(description="Streams with an open episode.")
+
+
+class ModelList(BaseModel):
+    models: list[ModelSummary]
+
+
+class ErrorDetail(BaseModel):
+    code: str = Field(description="Stable machine-readable code.", examples=["invalid_body"])
+    message: str = Field(description="What is wrong, for people.")
+    field: str | None = Field(None, description="The input at fault, dotted.",
+                              examples=["observation"])
+
+
+class ErrorBody(BaseModel):
+    """Every error has this shape."""
+
+    error: ErrorDetail

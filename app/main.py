@@ -1,0 +1,62 @@
+"""The FastAPI application: lifespan (models and journals), routers, errors, middleware."""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+
+import app
+from app.api import errors
+from app.api.metrics import AppMetrics
+from app.api.middleware import BodyLimit, Metrics
+from app.api.routes import models, ops, revise, stream
+from app.core import ShieldConfig
+from app.service.registry import ModelRegistry
+from app.settings import Settings, get_settings
+
+log = logging.getLogger("app")
+
+
+def default_config(settings: Settings) -> ShieldConfig:
+    """The configuration of the 'default' model: the settings' file, else the paper's."""
+    if settings.config is None:
+        return ShieldConfig()
+    return ShieldConfig.from_dict(json.loads(settings.config.read_text()))
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the service; models load (journals replay) when the app starts."""
+    settings = settings or get_settings()
+    registry = ModelRegistry(settings.data_dir, settings.fsync, settings.snapshot_every,
+                             default_config(settings))
+
+    @asynccontextmanager
+    async def lifespan(_: FastAPI) -> AsyncIterator[None]:
+        registry.open()
+        if settings.data_dir is None:
+            log.warning("no data directory: models live in memory only and are lost on exit")
+        else:
+            log.info("models stored in %s (fsync=%s)", settings.data_dir, settings.fsync)
+        yield
+        registry.close()
+
+    api = FastAPI(
+        title="e-FSM safety shield",
+        version=app.__version__,
+        summary="An online evolving model that revises a controller's proposed actions.",
+        lifespan=lifespan,
+    )
+    api.state.settings = settings
+    api.state.registry = registry
+    api.state.metrics = AppMetrics(registry)
+    errors.install(api)
+    for router in (revise.router, models.router, stream.router, ops.router):
+        api.include_router(router)
+    api.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    api.add_middleware(Metrics, requests=api.state.metrics.requests,
+                       latency=api.state.metrics.latency)
+    return api

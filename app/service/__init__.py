@@ -1,0 +1,1 @@
+"""Process concerns around the core: many models, locks, durability. Knows nothing of HTTP."""

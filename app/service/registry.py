@@ -1,0 +1,293 @@
+"""Many e-FSM models in one process: creation, lookup, serialised steps, durability.
+
+Each model has its own lock: steps to one model are applied one at a time, in the order the
+lock is taken, while other models proceed in parallel. Every accepted learning request is
+journaled before it is applied (see :mod:`app.service.storage`), so a crash loses nothing that
+was acknowledged under ``fsync=always``. A bad request is validated in full first and changes
+nothing.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import threading
+from collections.abc import Iterable, Sequence
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from app.core import Decision, Shield, ShieldConfig, ShieldError
+from app.core.shield import StepInput
+from app.service import codec
+from app.service.storage import Fsync, ModelStore
+
+log = logging.getLogger("app.registry")
+
+NAME = re.compile(r"[a-z0-9][a-z0-9_-]{0,63}")
+DEFAULT_MODEL = "default"
+
+
+class UnknownModel(ShieldError):
+    """No model has this name."""
+
+    code = "unknown_model"
+
+
+class ModelExists(ShieldError):
+    """A model with this name exists already."""
+
+    code = "model_exists"
+
+
+class InvalidName(ShieldError):
+    """A model name must match ``[a-z0-9][a-z0-9_-]{0,63}``."""
+
+    code = "invalid_name"
+
+
+@dataclass
+class Model:
+    """One model with its lock and its files."""
+
+    name: str
+    shield: Shield
+    store: ModelStore | None
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    since_snapshot: int = 0
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step as the API hands it over: keyword arguments of :meth:`Shield.step`."""
+
+    observation: Sequence[float]
+    action: float | None
+    stream: str = "0"
+    event: str | None = None
+    done: bool = False
+    applied_action: float | None = None
+    learn: bool = True
+    shadow: bool = False
+
+    def journal(self) -> dict[str, Any]:
+        """The record that replays this step."""
+        return {"o": list(self.observation), "a": self.action, "s": self.stream,
+                "e": self.event, "d": self.done, "p": self.applied_action, "h": self.shadow}
+
+    @classmethod
+    def from_journal(cls, r: dict[str, Any]) -> Step:
+        return cls(r["o"], r["a"], r["s"], r["e"], r["d"], r["p"], True, r["h"])
+
+
+class ModelRegistry:
+    """The models of one server."""
+
+    def __init__(self, data_dir: Path | None = None, fsync: Fsync = "interval",
+                 snapshot_every: int = 50_000,
+                 default_config: ShieldConfig | None = None) -> None:
+        self.data_dir = data_dir
+        self.fsync = fsync
+        self.snapshot_every = snapshot_every
+        self.default_config = default_config or ShieldConfig()
+        self._models: dict[str, Model] = {}
+        self._lock = threading.Lock()  # the name -> model map
+        self._stop = threading.Event()
+        self._syncer: threading.Thread | None = None
+        self.ready = False
+
+    # --- life cycle -----------------------------------------------------------------------
+
+    def open(self) -> None:
+        """Load every stored model (snapshot + journal replay) and make sure 'default' exists."""
+        if self.data_dir is not None:
+            root = self.data_dir / "models"
+            root.mkdir(parents=True, exist_ok=True)
+            for directory in sorted(p for p in root.iterdir() if p.is_dir()):
+                if (directory / "config.json").exists():
+                    self._models[directory.name] = self._load(directory)
+            if self.fsync == "interval":
+                self._syncer = threading.Thread(target=self._sync_loop, name="journal-sync",
+                                                 daemon=True)
+                self._syncer.start()
+        if DEFAULT_MODEL not in self._models:
+            self.create(DEFAULT_MODEL, self.default_config)
+        self.ready = True
+
+    def close(self) -> None:
+        """Snapshot every model and close its files."""
+        self.ready = False
+        self._stop.set()
+        if self._syncer is not None:
+            self._syncer.join()
+        for model in list(self._models.values()):
+            with model.lock:
+                if model.store is not None:
+                    if model.since_snapshot:
+                        self._snapshot(model)
+                    model.store.close()
+
+    def _sync_loop(self) -> None:
+        while not self._stop.wait(1.0):  # fsync=interval: at most one second at risk
+            for model in list(self._models.values()):
+                if model.store is not None:
+                    model.store.sync()
+
+    def _load(self, directory: Path) -> Model:
+        store = ModelStore(directory, self.fsync)
+        blob = store.read_snapshot()
+        if blob is not None:
+            shield = Shield.from_snapshot(codec.from_npz(blob))
+        else:
+            shield = Shield(ShieldConfig.from_dict(store.read_config()))
+        replayed = 0
+        for record in store.records():
+            if record["v"] <= shield.counters.model_version:
+                continue  # already in the snapshot
+            for step in record["steps"]:
+                shield.step(**vars(Step.from_journal(step)))
+                replayed += 1
+            if shield.counters.model_version != record["v"]:
+                log.error("%s: replay reached version %d, the journal says %d", directory.name,
+                          shield.counters.model_version, record["v"])
+        log.info("model %r: %d states, version %d (%d journaled steps replayed)",
+                 directory.name, shield.n_states, shield.counters.model_version, replayed)
+        return Model(directory.name, shield, store, since_snapshot=replayed)
+
+    # --- models ---------------------------------------------------------------------------
+
+    def names(self) -> list[str]:
+        return sorted(self._models)
+
+    def get(self, name: str) -> Model:
+        try:
+            return self._models[name]
+        except KeyError:
+            raise UnknownModel(f"no model named {name!r}", field="name") from None
+
+    def create(self, name: str, config: ShieldConfig) -> Model:
+        """A new, empty model (its configuration is stored at once)."""
+        check_name(name)
+        with self._lock:
+            if name in self._models:
+                raise ModelExists(f"a model named {name!r} exists", field="name")
+            model = Model(name, Shield(config), self._store(name))
+            if model.store is not None:
+                model.store.create(config.to_dict())
+            self._models[name] = model
+            return model
+
+    def restore(self, name: str, snapshot: dict[str, Any]) -> Model:
+        """Create or replace a model from a snapshot (the snapshot is stored at once)."""
+        check_name(name)
+        shield = Shield.from_snapshot(snapshot)
+        with self._lock:
+            old = self._models.get(name)
+            if old is not None:
+                with old.lock:
+                    if old.store is not None:
+                        old.store.close()
+            model = Model(name, shield, self._store(name))
+            if model.store is not None:
+                model.store.create(shield.config.to_dict())
+                self._snapshot(model)
+            self._models[name] = model
+            return model
+
+    def delete(self, name: str) -> None:
+        """Remove a model and its files."""
+        with self._lock:
+            model = self.get(name)
+            with model.lock:
+                del self._models[name]
+                if model.store is not None:
+                    model.store.remove()
+
+    def reset(self, name: str) -> Model:
+        """Empty a model: no states, counters at zero, its seed's generator."""
+        model = self.get(name)
+        with model.lock:
+            model.shield.reset()
+            if model.store is not None:
+                self._snapshot(model)
+        return model
+
+    def _store(self, name: str) -> ModelStore | None:
+        if self.data_dir is None:
+            return None
+        return ModelStore(self.data_dir / "models" / name, self.fsync)
+
+    def _snapshot(self, model: Model) -> None:
+        assert model.store is not None
+        model.store.write_snapshot(codec.to_npz(model.shield.snapshot()))
+        model.since_snapshot = 0
+
+    # --- steps ----------------------------------------------------------------------------
+
+    def step(self, name: str, step: Step) -> Decision:
+        """One step of one model."""
+        decisions = self.step_many([(name, step)])
+        assert decisions is not None
+        return decisions[0]
+
+    def try_step(self, name: str, step: Step) -> Decision | None:
+        """One step if the model's lock is free right now, else None (nothing done)."""
+        decisions = self.step_many([(name, step)], blocking=False)
+        return None if decisions is None else decisions[0]
+
+    def step_batch(self, name: str, steps: Sequence[Step]) -> list[Decision]:
+        """Steps of one model, in order; one bad step rejects them all."""
+        decisions = self.step_many([(name, s) for s in steps])
+        assert decisions is not None
+        return decisions
+
+    def step_many(self, steps: Sequence[tuple[str, Step]],
+                  blocking: bool = True) -> list[Decision] | None:
+        """Steps across models, in order; one bad step (or unknown model) rejects them all.
+
+        With ``blocking=False`` nothing is done (None) if a model's lock is taken.
+        """
+        models = {name: self.get(name) for name in dict.fromkeys(n for n, _ in steps)}
+        with ExitStack() as stack:
+            for name in sorted(models):  # a fixed order: no deadlock between batches
+                lock = models[name].lock
+                if not lock.acquire(blocking=blocking):
+                    return None
+                stack.callback(lock.release)
+            inputs = [_validate(models[name].shield, step, i, len(steps) > 1)
+                      for i, (name, step) in enumerate(steps)]
+            self._journal(models, steps)
+            decisions = [models[name].shield.apply(inp)
+                         for (name, _), inp in zip(steps, inputs, strict=True)]
+            for model in models.values():
+                if model.store is not None and model.since_snapshot >= self.snapshot_every:
+                    self._snapshot(model)
+        return decisions
+
+    def _journal(self, models: dict[str, Model], steps: Iterable[tuple[str, Step]]) -> None:
+        grouped: dict[str, list[dict[str, Any]]] = {}
+        for name, step in steps:
+            if step.learn:
+                grouped.setdefault(name, []).append(step.journal())
+        for name, records in grouped.items():
+            model = models[name]
+            if model.store is not None:
+                version = model.shield.counters.model_version + len(records)
+                model.store.append({"v": version, "steps": records})
+            model.since_snapshot += len(records)
+
+
+def _validate(shield: Shield, step: Step, index: int, batch: bool) -> StepInput:
+    try:
+        return shield.validate(**vars(step))
+    except ShieldError as error:
+        if batch:
+            error.field = f"steps.{index}.{error.field}" if error.field else f"steps.{index}"
+        raise
+
+
+def check_name(name: str) -> None:
+    """Refuse names outside ``[a-z0-9][a-z0-9_-]{0,63}``."""
+    if not NAME.fullmatch(name):
+        raise InvalidName("a model name matches [a-z0-9][a-z0-9_-]{0,63}", field="name")

@@ -1,0 +1,155 @@
+"""The files of one model: configuration, the last snapshot, and a journal of accepted steps.
+
+``DATA/models/<name>/`` holds ``config.json``, ``snapshot.npz`` and ``journal.log``. Every
+accepted learning request is appended to the journal *before* the model applies it (write-ahead),
+one line per request: ``<crc32 hex> <json>``. Snapshots are written atomically (temporary file,
+fsync, rename, fsync of the directory). Because learning is deterministic, the snapshot plus the
+journal records after it rebuild the model exactly. A torn last line (a crash mid-write) fails
+its checksum and is dropped with a log line.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import threading
+import zlib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, Literal
+
+log = logging.getLogger("app.storage")
+
+Fsync = Literal["always", "interval", "never"]
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Replace ``path`` with ``data`` so that a crash leaves the old or the new file, whole."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    sync_directory(path.parent)
+
+
+def sync_directory(directory: Path) -> None:
+    """Make a rename or a new file in ``directory`` durable."""
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+class ModelStore:
+    """Durable storage of one model."""
+
+    def __init__(self, directory: Path, fsync: Fsync) -> None:
+        self.directory = directory
+        self.fsync = fsync
+        self._journal: Any = None
+        self._dirty = False
+        self._lock = threading.Lock()  # the journal file against the interval syncer
+
+    @property
+    def config_path(self) -> Path:
+        return self.directory / "config.json"
+
+    @property
+    def snapshot_path(self) -> Path:
+        return self.directory / "snapshot.npz"
+
+    @property
+    def journal_path(self) -> Path:
+        return self.directory / "journal.log"
+
+    def create(self, config: dict[str, Any]) -> None:
+        """Start the files of a new model."""
+        self.directory.mkdir(parents=True, exist_ok=True)
+        write_atomic(self.config_path, json.dumps(config, indent=2).encode())
+        sync_directory(self.directory.parent)
+
+    def append(self, record: dict[str, Any]) -> None:
+        """Write one journal record; durable at once under ``fsync=always``."""
+        payload = json.dumps(record, separators=(",", ":"), allow_nan=False)
+        line = f"{zlib.crc32(payload.encode()):08x} {payload}\n".encode()
+        with self._lock:
+            if self._journal is None:
+                self._journal = open(self.journal_path, "ab")
+            self._journal.write(line)
+            self._journal.flush()  # in the OS: survives a crash of this process
+            if self.fsync == "always":
+                os.fsync(self._journal.fileno())
+            else:
+                self._dirty = True
+
+    def sync(self) -> None:
+        """Flush the journal to the disk if it changed (the ``interval`` policy calls this)."""
+        with self._lock:
+            if self._dirty and self._journal is not None:
+                os.fsync(self._journal.fileno())
+                self._dirty = False
+
+    def write_snapshot(self, blob: bytes) -> None:
+        """Store a snapshot, then empty the journal it covers."""
+        write_atomic(self.snapshot_path, blob)
+        with self._lock:
+            if self._journal is not None:
+                self._journal.close()
+                self._journal = None
+            with open(self.journal_path, "wb") as f:
+                os.fsync(f.fileno())
+            self._dirty = False
+
+    def read_snapshot(self) -> bytes | None:
+        """The last snapshot, if one was taken."""
+        return self.snapshot_path.read_bytes() if self.snapshot_path.exists() else None
+
+    def read_config(self) -> dict[str, Any]:
+        result: dict[str, Any] = json.loads(self.config_path.read_text())
+        return result
+
+    def records(self) -> Iterator[dict[str, Any]]:
+        """Journal records in order; a damaged line ends the replay with a log line."""
+        if not self.journal_path.exists():
+            return
+        lines = self.journal_path.read_bytes().split(b"\n")
+        complete, tail = lines[:-1], lines[-1]
+        for number, line in enumerate(complete, start=1):
+            record = _parse(line)
+            if record is None:
+                log.error("%s: journal line %d is damaged; dropping it and what follows",
+                          self.journal_path, number)
+                return
+            yield record
+        if tail:
+            log.warning("%s: dropped a torn last journal record (%d bytes)",
+                        self.journal_path, len(tail))
+
+    def close(self) -> None:
+        """Flush and close the journal."""
+        self.sync()
+        with self._lock:
+            if self._journal is not None:
+                self._journal.close()
+                self._journal = None
+
+    def remove(self) -> None:
+        """Delete every file of the model."""
+        self.close()
+        shutil.rmtree(self.directory, ignore_errors=True)
+
+
+def _parse(line: bytes) -> dict[str, Any] | None:
+    crc, _, payload = line.partition(b" ")
+    try:
+        if int(crc, 16) != zlib.crc32(payload):
+            return None
+        record: dict[str, Any] = json.loads(payload)
+        return record
+    except ValueError:
+        return None

@@ -1,0 +1,57 @@
+"""Server settings: environment variables (``EFSM_*``) and the command line, one typed source."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """How the shield service runs. Every field is also ``EFSM_<NAME>`` in the environment."""
+
+    model_config = SettingsConfigDict(
+        env_prefix="EFSM_",
+        cli_kebab_case=True,
+        cli_prog_name="python -m app serve",
+        cli_implicit_flags=True,
+    )
+
+    host: str = Field("127.0.0.1", description="Address to bind (0.0.0.0 in the container).")
+    port: int = Field(8000, ge=0, le=65535, description="TCP port.")
+    data_dir: Path | None = Field(
+        None, description="Where models are stored; without it models live in memory only."
+    )
+    fsync: Literal["always", "interval", "never"] = Field(
+        "interval",
+        description="When the journal reaches the disk: on every accepted request, at most one "
+        "second later, or when the operating system decides.",
+    )
+    token: str | None = Field(
+        None, description="Bearer token every route but /healthz and /readyz requires."
+    )
+    config: Path | None = Field(
+        None, description="JSON file with the configuration of the 'default' model."
+    )
+    max_body_bytes: int = Field(8 * 2**20, ge=1024, description="Largest request body (413).")
+    max_batch: int = Field(4096, ge=1, description="Most steps in one batch request.")
+    snapshot_every: int = Field(
+        50_000, ge=1, description="Steps of a model between two snapshots of it."
+    )
+    log_level: Literal["debug", "info", "warning", "error"] = "info"
+
+    @field_validator("token")
+    @classmethod
+    def _token_not_blank(cls, value: str | None) -> str | None:
+        if value is not None and not value.strip():
+            raise ValueError("a token that is set must not be empty")
+        return value
+
+
+@lru_cache
+def get_settings() -> Settings:
+    """The settings of this process (tests build their own :class:`Settings`)."""
+    return Settings()

@@ -1,0 +1,1 @@
+"""The controller side: clients of the shield service (and, later, the simulator and DDPG)."""

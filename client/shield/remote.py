@@ -1,0 +1,255 @@
+"""Clients of the shield's HTTP and WebSocket API, with the same method names everywhere.
+
+    with ShieldClient("http://127.0.0.1:8000", token="...") as shield:
+        decision = shield.revise([14.2, 38.5, 15.0], 0.8, stream="car-1")
+
+Decisions come back as :class:`app.core.Decision`, the very type the in-process shield returns.
+An error body raises :class:`ShieldAPIError` (status, code, message, field); a server that
+cannot be reached raises :class:`ShieldUnavailable`.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from contextlib import ExitStack
+from typing import Any
+
+import httpx
+from websockets.exceptions import WebSocketException
+from websockets.sync.client import ClientConnection, connect
+
+from app.core import Candidate, Decision
+
+DEFAULT_TIMEOUT = 10.0  # [s]
+
+
+class ShieldAPIError(Exception):
+    """The service answered with an error body."""
+
+    def __init__(self, status: int, code: str, message: str, field: str | None) -> None:
+        super().__init__(f"{status} {code}: {message}" + (f" (field {field})" if field else ""))
+        self.status, self.code, self.message, self.field = status, code, message, field
+
+
+class ShieldUnavailable(Exception):
+    """The service could not be reached."""
+
+
+def decision_from_json(d: Mapping[str, Any]) -> Decision:
+    """A decision record as the typed object of the core."""
+    fields = dict(d)
+    fields["candidates"] = tuple(Candidate(**c) for c in d["candidates"])
+    return Decision(**fields)
+
+
+def step_body(observation: Sequence[float], action: float | None, **options: Any) -> dict[str, Any]:
+    """A step's JSON body; options with their default value are left out."""
+    body: dict[str, Any] = {"observation": [float(v) for v in observation],
+                            "action": None if action is None else float(action)}
+    defaults = {"stream": "0", "event": None, "done": False, "applied_action": None,
+                "learn": True, "shadow": False}
+    for key, value in options.items():
+        if key not in defaults:
+            raise TypeError(f"unknown step option {key!r}")
+        if value != defaults[key]:
+            body[key] = value
+    return body
+
+
+def _raise_for(response: httpx.Response) -> None:
+    if response.is_success:
+        return
+    try:
+        error = response.json()["error"]
+    except (ValueError, KeyError, TypeError):
+        text = response.text[:200]
+        raise ShieldAPIError(response.status_code, "http_error", text, None) from None
+    raise ShieldAPIError(response.status_code, error["code"], error["message"], error.get("field"))
+
+
+def _path(model: str | None, suffix: str) -> str:
+    return f"/{suffix}" if model is None else f"/models/{model}/{suffix}"
+
+
+class ShieldClient:
+    """Synchronous HTTP client (keep-alive)."""
+
+    def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
+                 timeout: float = DEFAULT_TIMEOUT) -> None:
+        headers = {"Authorization": f"Bearer {token}"} if token else {}
+        self.model = model
+        self._http = httpx.Client(base_url=url, headers=headers, timeout=timeout)
+
+    def _call(self, method: str, path: str, **kwargs: Any) -> Any:
+        try:
+            response = self._http.request(method, path, **kwargs)
+        except httpx.TransportError as error:
+            raise ShieldUnavailable(f"shield at {self._http.base_url} unreachable: {error}") \
+                from error
+        _raise_for(response)
+        return response.json() if response.content else None
+
+    def revise(self, observation: Sequence[float], action: float | None,
+               **options: Any) -> Decision:
+        """One step; options are the API's (stream, event, done, applied_action, learn, ...)."""
+        body = step_body(observation, action, **options)
+        return decision_from_json(self._call("POST", _path(self.model, "revise"), json=body))
+
+    def revise_batch(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
+        """Steps in order (each a step body; with a ``model`` key when no model is set)."""
+        path = "/revise/batch" if self.model is None else f"/models/{self.model}/revise/batch"
+        result = self._call("POST", path, json={"steps": list(steps)})
+        return [decision_from_json(d) for d in result["decisions"]]
+
+    def snapshot(self, name: str | None = None, **query: Any) -> dict[str, Any]:
+        """GET /models/{name} (tpm=..., action=..., exact=...)."""
+        result: dict[str, Any] = self._call("GET", f"/models/{name or self.model or 'default'}",
+                                            params=query)
+        return result
+
+    def restore(self, name: str, snapshot: Mapping[str, Any]) -> dict[str, Any]:
+        result: dict[str, Any] = self._call("PUT", f"/models/{name}", json=snapshot)
+        return result
+
+    def models(self) -> list[dict[str, Any]]:
+        result: list[dict[str, Any]] = self._call("GET", "/models")["models"]
+        return result
+
+    def create_model(self, name: str, config: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        result: dict[str, Any] = self._call("POST", "/models",
+                                            json={"name": name, "config": dict(config or {})})
+        return result
+
+    def delete_model(self, name: str) -> None:
+        self._call("DELETE", f"/models/{name}")
+
+    def reset_model(self, name: str) -> dict[str, Any]:
+        result: dict[str, Any] = self._call("POST", f"/models/{name}/reset")
+        return result
+
+    def health(self) -> bool:
+        return bool(self._call("GET", "/healthz")["status"] == "ok")
+
+    def close(self) -> None:
+        self._http.close()
+
+    def __enter__(self) -> ShieldClient:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+
+class AsyncShieldClient:
+    """Asynchronous HTTP client with the same methods, as coroutines."""
+
+    def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
+                 timeout: float = DEFAULT_TIMEOUT) -> None:
+        headers = {"Authorization": f"Bearer {token}"} if token else {}
+        self.model = model
+        self._http = httpx.AsyncClient(base_url=url, headers=headers, timeout=timeout)
+
+    async def _call(self, method: str, path: str, **kwargs: Any) -> Any:
+        try:
+            response = await self._http.request(method, path, **kwargs)
+        except httpx.TransportError as error:
+            raise ShieldUnavailable(f"shield at {self._http.base_url} unreachable: {error}") \
+                from error
+        _raise_for(response)
+        return response.json() if response.content else None
+
+    async def revise(self, observation: Sequence[float], action: float | None,
+                     **options: Any) -> Decision:
+        body = step_body(observation, action, **options)
+        return decision_from_json(await self._call("POST", _path(self.model, "revise"),
+                                                   json=body))
+
+    async def revise_batch(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
+        path = "/revise/batch" if self.model is None else f"/models/{self.model}/revise/batch"
+        result = await self._call("POST", path, json={"steps": list(steps)})
+        return [decision_from_json(d) for d in result["decisions"]]
+
+    async def snapshot(self, name: str | None = None, **query: Any) -> dict[str, Any]:
+        result: dict[str, Any] = await self._call(
+            "GET", f"/models/{name or self.model or 'default'}", params=query)
+        return result
+
+    async def models(self) -> list[dict[str, Any]]:
+        result: list[dict[str, Any]] = (await self._call("GET", "/models"))["models"]
+        return result
+
+    async def create_model(self, name: str,
+                           config: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        result: dict[str, Any] = await self._call(
+            "POST", "/models", json={"name": name, "config": dict(config or {})})
+        return result
+
+    async def delete_model(self, name: str) -> None:
+        await self._call("DELETE", f"/models/{name}")
+
+    async def health(self) -> bool:
+        return bool((await self._call("GET", "/healthz"))["status"] == "ok")
+
+    async def close(self) -> None:
+        await self._http.aclose()
+
+    async def __aenter__(self) -> AsyncShieldClient:
+        return self
+
+    async def __aexit__(self, *_: object) -> None:
+        await self.close()
+
+
+class ShieldSession:
+    """One WebSocket connection: each step one frame, replies in order."""
+
+    def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
+                 timeout: float = DEFAULT_TIMEOUT) -> None:
+        ws_url = url.replace("http://", "ws://", 1).replace("https://", "wss://", 1)
+        ws_url = ws_url.rstrip("/") + ("/ws" if model is None else f"/models/{model}/ws")
+        headers = {"Authorization": f"Bearer {token}"} if token else None
+        self.timeout = timeout
+        self._stack = ExitStack()
+        try:
+            self._ws: ClientConnection = self._stack.enter_context(
+                connect(ws_url, additional_headers=headers, open_timeout=timeout))
+        except (OSError, WebSocketException) as error:
+            raise ShieldUnavailable(f"shield at {ws_url} unreachable: {error}") from error
+
+    def _receive(self) -> dict[str, Any]:
+        try:
+            reply: dict[str, Any] = json.loads(self._ws.recv(timeout=self.timeout))
+        except (OSError, WebSocketException, TimeoutError) as error:
+            raise ShieldUnavailable(f"WebSocket session lost: {error}") from error
+        return reply
+
+    @staticmethod
+    def _decision(reply: dict[str, Any]) -> Decision:
+        if "error" in reply:
+            e = reply["error"]
+            status = 404 if e["code"] == "unknown_model" else 422
+            raise ShieldAPIError(status, e["code"], e["message"], e.get("field"))
+        return decision_from_json(reply)
+
+    def revise(self, observation: Sequence[float], action: float | None,
+               **options: Any) -> Decision:
+        self._ws.send(json.dumps(step_body(observation, action, **options)))
+        return self._decision(self._receive())
+
+    def revise_batch(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
+        """Send every step, then read every reply (pipelined, in order); errors are raised
+        after all replies are read, so the session stays in step."""
+        for step in steps:
+            self._ws.send(json.dumps(step))
+        replies = [self._receive() for _ in steps]
+        return [self._decision(r) for r in replies]
+
+    def close(self) -> None:
+        self._stack.close()
+
+    def __enter__(self) -> ShieldSession:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()

@@ -1,0 +1,248 @@
+"""The HTTP and WebSocket contract of spec/api.md, in process."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.main import create_app
+from app.service import codec
+from app.settings import Settings
+
+STEP = {"observation": [14.2, 38.5, 15.0], "action": 0.8}
+
+
+def episode(c: TestClient, path: str = "/revise", stream: str = "0", n: int = 6,
+            crash: bool = True) -> list[dict[str, Any]]:
+    out = []
+    for t in range(n):
+        body = {"observation": [10.0 + t, 40.0 - 5 * t, 9.0], "action": 0.5, "stream": stream}
+        out.append(c.post(path, json=body).json())
+    end = {"observation": [16.0, 0.0, 9.0], "action": None, "stream": stream, "done": True,
+           "event": "collision" if crash else None}
+    out.append(c.post(path, json=end).json())
+    return out
+
+
+def exact(c: TestClient, name: str = "default") -> Any:
+    return c.get(f"/models/{name}", params={"tpm": "none"}).json()["exact"]
+
+
+def test_revise_returns_the_decision_record(client: TestClient) -> None:
+    r = client.post("/revise", json=STEP)
+    assert r.status_code == 200
+    d = r.json()
+    assert set(d) == {"action", "proposed", "revised", "reason", "verdict", "risk", "threshold",
+                      "candidates", "state", "n_states", "new_state", "episode", "step",
+                      "model_version", "stream", "shadow", "suggested"}
+    assert (d["action"], d["reason"]) == (0.8, "cold_start")
+    assert (d["n_states"], d["model_version"]) == (1, 1)
+
+
+def test_episodes_flags_and_counters_through_the_api(client: TestClient) -> None:
+    decisions = episode(client)
+    assert decisions[-1]["reason"] == "done" and decisions[-1]["action"] is None
+    assert decisions[-1]["episode"] == 1
+    snap = client.get("/model").json()
+    assert snap["episodes"] == 1 and snap["steps"] == 7
+    assert "collision" in [s["flag"] for s in snap["states"]]
+
+
+def test_models_lifecycle(client: TestClient) -> None:
+    r = client.post("/models", json={"name": "run-1", "config": {"reviser": {"seed": 3}}})
+    assert r.status_code == 201 and r.json()["name"] == "run-1"
+    assert client.post("/models", json={"name": "run-1"}).status_code == 409
+    assert client.post("/models/run-1/revise", json=STEP).json()["model_version"] == 1
+    assert [m["name"] for m in client.get("/models").json()["models"]] == ["default", "run-1"]
+    assert client.post("/models/run-1/reset").json()["n_states"] == 0
+    assert client.delete("/models/run-1").status_code == 204
+    assert client.get("/models/run-1").status_code == 404
+
+
+def test_snapshot_views(client: TestClient) -> None:
+    episode(client)
+    sparse = client.get("/model").json()
+    assert sparse["tpm"]["format"] == "sparse" and len(sparse["tpm"]["matrices"]) == 20
+    n = sparse["n_states"]
+    dense = client.get("/model", params={"tpm": "dense", "action": 12}).json()
+    [matrix] = dense["tpm"]["matrices"]
+    assert matrix["bin"] == 12 and np.allclose(np.sum(matrix["dense"], axis=1), 1.0)
+    assert np.array(matrix["dense"]).shape == (n, n)
+    assert "tpm" not in client.get("/model", params={"tpm": "none"}).json()
+    assert "exact" not in client.get("/model", params={"exact": False}).json()
+
+
+def test_snapshot_put_restores_a_model_that_decides_alike(client: TestClient) -> None:
+    client.post("/models", json={"name": "a", "config": {"reviser": {
+        "activate_after_episodes": 1}}})
+    for _ in range(3):
+        episode(client, "/models/a/revise")
+    snap = client.get("/models/a").json()
+    assert client.put("/models/b", json=snap).status_code == 200
+    npz = client.get("/models/a", headers={"accept": "application/x-npz"}).content
+    assert client.put("/models/c", content=npz,
+                      headers={"content-type": "application/x-npz"}).status_code == 200
+    runs = [episode(client, f"/models/{m}/revise") for m in ("a", "b", "c")]
+    assert runs[0] == runs[1] == runs[2]
+    assert any(d["reason"] == "revised_safety" for d in runs[0])
+
+
+def test_npz_download_matches_the_core_snapshot(client: TestClient) -> None:
+    episode(client)
+    blob = client.get("/model", params={"format": "npz"}).content
+    restored = codec.from_npz(blob)
+    assert restored["counters"]["steps"] == 7
+
+
+def test_batch_and_batch_across_models(client: TestClient) -> None:
+    client.post("/models", json={"name": "r1"})
+    client.post("/models", json={"name": "r2"})
+    steps = [{**STEP, "stream": "s"}, {**STEP, "stream": "s"}]
+    r = client.post("/models/r1/revise/batch", json={"steps": steps})
+    assert [d["step"] for d in r.json()["decisions"]] == [0, 1]
+    across = [{**STEP, "model": "r1"}, {**STEP, "model": "r2"}, {**STEP, "model": "r2"}]
+    r = client.post("/revise/batch", json={"steps": across})
+    assert [d["model_version"] for d in r.json()["decisions"]] == [3, 1, 2]
+
+
+BAD = [
+    ("/revise", {"observation": [1.0, 2.0], "action": 0.0}, 422, "invalid_observation",
+     "observation"),
+    ("/revise", '{"observation": [1.0, NaN, 2.0], "action": 0.0}', 422, "invalid_body",
+     "observation.1"),
+    ("/revise", '{"observation": [1.0, Infinity, 2.0], "action": 0.0}', 422, "invalid_body",
+     "observation.1"),
+    ("/revise", {"observation": "fast", "action": 0.0}, 422, "invalid_body", "observation"),
+    ("/revise", {"observation": [1.0, 2.0, 3.0], "action": "0.5"}, 422, "invalid_body", "action"),
+    ("/revise", {"observation": [1.0, 2.0, 3.0], "action": 0.0, "done": "yes"}, 422,
+     "invalid_body", "done"),
+    ("/revise", {"observation": [1.0, 2.0, 3.0], "action": 0.0, "event": "meteor"}, 422,
+     "unknown_criterion", "event"),
+    ("/revise", {"observation": [1.0, 2.0, 3.0]}, 422, "invalid_action", "action"),
+    ("/revise", {"observation": [1.0, 2.0, 3.0], "action": 0.0, "colour": "red"}, 422,
+     "invalid_body", "colour"),
+    ("/revise", "{not json", 422, "invalid_json", None),
+    ("/models/ghost/revise", STEP, 404, "unknown_model", "name"),
+    ("/models/BAD!/revise", STEP, 422, "invalid_body", "name"),
+    ("/models/default/revise/batch", {"steps": [STEP, {**STEP, "observation": [1.0]}, STEP]},
+     422, "invalid_observation", "steps.1.observation"),
+    ("/revise/batch", {"steps": [{**STEP, "model": "default"}, {**STEP, "model": "ghost"}]},
+     404, "unknown_model", "name"),
+]
+
+
+@pytest.mark.parametrize(("path", "body", "status", "code", "field"), BAD)
+def test_bad_requests_get_an_error_body_and_change_nothing(
+    client: TestClient, path: str, body: Any, status: int, code: str, field: str | None
+) -> None:
+    episode(client, n=3)
+    before = exact(client)
+    if isinstance(body, str):
+        r = client.post(path, content=body, headers={"content-type": "application/json"})
+    else:
+        r = client.post(path, json=body)
+    assert r.status_code == status, r.text
+    assert r.json()["error"]["code"] == code
+    assert r.json()["error"]["field"] == field
+    assert "Traceback" not in r.text
+    assert exact(client) == before
+
+
+def test_bad_configuration_names_the_field(client: TestClient) -> None:
+    r = client.post("/models", json={"name": "x", "config": {"clustering": {"rho": 2}}})
+    assert r.status_code == 422 and r.json()["error"]["field"] == "config.clustering.rho"
+    r = client.post("/models", json={"name": "x", "config": {"reviser": {"nois": "std"}}})
+    assert r.json()["error"]["field"] == "config.reviser.nois"
+    assert client.get("/models/x").status_code == 404
+
+
+@pytest.fixture
+def strict_client() -> Iterator[TestClient]:
+    settings = Settings(token="s3cret", max_body_bytes=4096, max_batch=3)
+    with TestClient(create_app(settings)) as c:
+        yield c
+
+
+def test_token_is_required_everywhere_but_health(strict_client: TestClient) -> None:
+    c = strict_client
+    assert c.get("/healthz").status_code == 200 and c.get("/readyz").status_code == 200
+    for method, path in [("post", "/revise"), ("get", "/models"), ("get", "/model"),
+                         ("get", "/metrics"), ("post", "/models/default/reset")]:
+        r = getattr(c, method)(path, json=STEP) if method == "post" else c.get(path)
+        assert r.status_code == 401, path
+        assert r.json()["error"]["code"] == "unauthorized"
+    wrong = {"Authorization": "Bearer nope"}
+    assert c.post("/revise", json=STEP, headers=wrong).status_code == 401
+    good = {"Authorization": "Bearer s3cret"}
+    assert c.post("/revise", json=STEP, headers=good).status_code == 200
+    assert c.get("/model", headers=good).json()["steps"] == 1
+
+
+def test_body_and_batch_limits(strict_client: TestClient) -> None:
+    good = {"Authorization": "Bearer s3cret"}
+    big = {"steps": [STEP] * 200}
+    r = strict_client.post("/models/default/revise/batch", json=big, headers=good)
+    assert r.status_code == 413 and r.json()["error"]["code"] == "too_large"
+    r = strict_client.post("/models/default/revise/batch", json={"steps": [STEP] * 4},
+                           headers=good)
+    assert r.status_code == 413 and r.json()["error"]["field"] == "steps"
+    assert strict_client.get("/model", headers=good).json()["steps"] == 0
+
+
+def test_websocket_steps_and_errors_keep_the_connection(client: TestClient) -> None:
+    with client.websocket_connect("/ws") as ws:
+        ws.send_text(json.dumps(STEP))
+        first = ws.receive_json()
+        ws.send_text("{broken")
+        assert ws.receive_json()["error"]["code"] == "invalid_json"
+        ws.send_text('{"observation": [1, NaN, 2], "action": 0}')
+        nan = ws.receive_json()["error"]
+        assert (nan["code"], nan["field"]) == ("invalid_body", "observation.1")
+        ws.send_text(json.dumps({"observation": [1.0], "action": 0.0}))
+        assert ws.receive_json()["error"] == {"code": "invalid_observation", "field":
+                                              "observation", "message": ws_msg(1)}
+        ws.send_bytes(b"\x00")
+        assert ws.receive_json()["error"]["code"] == "unsupported_frame"
+        ws.send_text(json.dumps(STEP))
+        second = ws.receive_json()
+    assert (first["model_version"], second["model_version"]) == (1, 2)
+
+
+def ws_msg(n: int) -> str:
+    return f"observation must hold 3 numbers, got shape [{n}]"
+
+
+def test_websocket_needs_the_token(strict_client: TestClient) -> None:
+    from starlette.websockets import WebSocketDisconnect
+
+    with pytest.raises(WebSocketDisconnect):
+        with strict_client.websocket_connect("/ws") as ws:
+            ws.receive_json()
+    with strict_client.websocket_connect("/ws?token=s3cret") as ws:
+        ws.send_text(json.dumps(STEP))
+        assert ws.receive_json()["model_version"] == 1
+
+
+def test_metrics_count_requests_decisions_and_states(client: TestClient) -> None:
+    episode(client)
+    client.post("/models/ghost/revise", json=STEP)
+    text = client.get("/metrics").text
+    assert 'efsm_http_requests_total{method="POST",route="/revise",status="200"} 7.0' in text
+    assert 'route="/models/{name}/revise",status="404"' in text
+    assert 'efsm_decisions_total{model="default",reason="done"} 1.0' in text
+    assert 'efsm_states{model="default"}' in text
+    assert 'efsm_episodes_total{model="default"} 1.0' in text
+
+
+def test_openapi_documents_every_request_field(client: TestClient) -> None:
+    schema = client.get("/openapi.json").json()
+    request = schema["components"]["schemas"]["ReviseRequest"]
+    for name, field in request["properties"].items():
+        assert field.get("description"), name
+    assert request.get("examples")
+    assert "/models/{name}/revise/batch" in schema["paths"]

@@ -1,0 +1,164 @@
+"""A real server process: kill -9 mid-stream, concurrent streams, the start command, clients."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from app.core import Decision
+from client.shield import (
+    AsyncShieldClient,
+    ShieldAPIError,
+    ShieldClient,
+    ShieldSession,
+    ShieldUnavailable,
+)
+from tests.conftest import Server, free_port, start_server
+from tests.utils import random_stream
+
+
+def test_nothing_acknowledged_is_lost_after_kill_9(live_server: Server) -> None:
+    acknowledged = 0
+    stop = threading.Event()
+
+    def drive() -> None:
+        nonlocal acknowledged
+        with ShieldClient(live_server.url) as shield:
+            for z, a, done in random_stream(5, 100_000):
+                if stop.is_set():
+                    return
+                try:
+                    shield.revise(z, None if done else a, done=done)
+                except ShieldUnavailable:
+                    return
+                acknowledged += 1
+
+    driver = threading.Thread(target=drive)
+    driver.start()
+    time.sleep(3.0)
+    live_server.kill()  # SIGKILL while requests are in flight
+    stop.set()
+    driver.join()
+    assert acknowledged > 50
+
+    restarted = start_server(live_server.data_dir, "--fsync", "always")
+    try:
+        with ShieldClient(restarted.url) as shield:
+            snapshot = shield.snapshot(exact=False, tpm="none")
+        # every acknowledged step is there; at most the one in flight was applied unanswered
+        assert acknowledged <= snapshot["model_version"] <= acknowledged + 1
+    finally:
+        restarted.stop()
+
+
+def test_sixteen_concurrent_streams_learn_every_accepted_step(live_server: Server) -> None:
+    accepted = [0] * 16
+
+    def stream(i: int) -> None:
+        with ShieldClient(live_server.url) as shield:
+            for z, a, done in random_stream(i, 40):
+                shield.revise(z, None if done else a, done=done, stream=f"car-{i}")
+                accepted[i] += 1
+
+    threads = [threading.Thread(target=stream, args=(i,)) for i in range(16)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    with ShieldClient(live_server.url) as shield:
+        model = shield.snapshot(exact=False, tpm="none")
+    assert model["steps"] == model["model_version"] == sum(accepted) == 640
+
+
+def test_the_three_clients_agree_with_each_other(live_server: Server) -> None:
+    steps = [(z, None if d else a, d) for z, a, d in random_stream(9, 100)]
+    with ShieldClient(live_server.url) as admin:
+        for name in ("via-http", "via-ws", "via-async"):
+            admin.create_model(name, {"reviser": {"activate_after_episodes": 1}})
+    with ShieldClient(live_server.url, model="via-http") as http:
+        by_http = [http.revise(z, a, done=d, event="collision" if d else None)
+                   for z, a, d in steps]
+        with pytest.raises(ShieldAPIError) as raised:
+            http.revise([1.0], 0.0)
+        assert (raised.value.status, raised.value.code, raised.value.field) == (
+            422, "invalid_observation", "observation")
+    with ShieldSession(live_server.url, model="via-ws") as ws:
+        by_ws = [ws.revise(z, a, done=d, event="collision" if d else None)
+                 for z, a, d in steps]
+
+    async def run_async() -> list[Decision]:
+        async with AsyncShieldClient(live_server.url, model="via-async") as shield:
+            return [await shield.revise(z, a, done=d, event="collision" if d else None)
+                    for z, a, d in steps]
+
+    by_async = asyncio.run(run_async())
+    assert by_http == by_ws == by_async  # typed records, field for field
+    assert {"pass", "revised_safety"} & {d.reason for d in by_http}  # the reviser ran
+
+
+def test_an_unreachable_shield_is_one_clear_error() -> None:
+    with pytest.raises(ShieldUnavailable, match="unreachable"):
+        ShieldClient(f"http://127.0.0.1:{free_port()}", timeout=1).health()
+
+
+def test_settings_come_from_the_environment_too(tmp_path: Path) -> None:
+    server = start_server(tmp_path / "data", env={"EFSM_TOKEN": "from-env"})
+    try:
+        assert httpx.get(server.url + "/models").status_code == 401
+        with ShieldClient(server.url, token="from-env") as shield:
+            assert shield.models()[0]["name"] == "default"
+    finally:
+        server.stop()
+
+
+def test_without_a_data_directory_the_server_says_so(tmp_path: Path) -> None:
+    port = free_port()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "app", "serve", "--port", str(port)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+    )
+    try:
+        for _ in range(100):
+            try:
+                if httpx.get(f"http://127.0.0.1:{port}/readyz").status_code == 200:
+                    break
+            except httpx.TransportError:
+                time.sleep(0.1)
+    finally:
+        process.terminate()
+        output = process.communicate(timeout=10)[0].decode()
+    assert "models live in memory only" in output
+
+
+def test_the_container_command_runs_outside_docker(tmp_path: Path) -> None:
+    """The Dockerfile's CMD and HEALTHCHECK, with the environment the image sets."""
+    dockerfile = (Path(__file__).parents[2] / "Dockerfile").read_text()
+    assert 'CMD ["python", "-m", "app", "serve"]' in dockerfile
+    assert 'CMD ["python", "-m", "app.healthcheck"]' in dockerfile
+    port = free_port()
+    env = {**os.environ, "EFSM_HOST": "0.0.0.0", "EFSM_PORT": str(port),
+           "EFSM_DATA_DIR": str(tmp_path / "data")}
+    probe = [sys.executable, "-m", "app.healthcheck"]
+    assert subprocess.run(probe, env=env, timeout=10).returncode == 1  # nothing listens yet
+    process = subprocess.Popen([sys.executable, "-m", "app", "serve"], env=env,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        for _ in range(100):
+            if subprocess.run(probe, env=env, timeout=10).returncode == 0:
+                break
+            time.sleep(0.1)
+        else:
+            pytest.fail("the health probe never passed")
+        assert httpx.get(f"http://127.0.0.1:{port}/models").status_code == 200
+        assert (tmp_path / "data/models/default/config.json").exists()
+    finally:
+        process.terminate()
+        process.wait(10)
