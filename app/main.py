@@ -56,7 +56,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     errors.install(api)
     for router in (revise.router, models.router, stream.router, ops.router):
         api.include_router(router)
-    api.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    api.add_middleware(BodyLimit, limit=settings.max_body_bytes,
+                       snapshot_limit=settings.max_snapshot_bytes)
     api.add_middleware(Metrics, requests=api.state.metrics.requests,
                        latency=api.state.metrics.latency)
     return api

@@ -37,6 +37,9 @@ class Settings(BaseSettings):
         None, description="JSON file with the configuration of the 'default' model."
     )
     max_body_bytes: int = Field(8 * 2**20, ge=1024, description="Largest request body (413).")
+    max_snapshot_bytes: int = Field(
+        2**30, ge=1024, description="Largest snapshot uploaded with PUT /models/{name} (413)."
+    )
     max_batch: int = Field(4096, ge=1, description="Most steps in one batch request.")
     snapshot_every: int = Field(
         50_000, ge=1, description="Steps of a model between two snapshots of it."

@@ -15,12 +15,16 @@ from app.settings import Settings
 bearer = HTTPBearer(auto_error=False, description="Required when the server has a token.")
 
 
-def get_registry(request: Request) -> ModelRegistry:
+# Dependencies are coroutines: FastAPI runs plain functions in the threadpool, a thread hop
+# per dependency per request.
+
+
+async def get_registry(request: Request) -> ModelRegistry:
     registry: ModelRegistry = request.app.state.registry
     return registry
 
 
-def get_settings(request: Request) -> Settings:
+async def get_settings(request: Request) -> Settings:
     settings: Settings = request.app.state.settings
     return settings
 
@@ -32,7 +36,7 @@ def token_ok(expected: str | None, given: str | None) -> bool:
     return given is not None and hmac.compare_digest(given.encode(), expected.encode())
 
 
-def require_token(
+async def require_token(
     settings: Annotated[Settings, Depends(get_settings)],
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)],
 ) -> None:

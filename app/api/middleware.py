@@ -13,19 +13,24 @@ from app.api.errors import error_body
 
 
 class BodyLimit:
-    """Answer 413 to a body larger than ``limit`` bytes, declared or streamed."""
+    """Answer 413 to a body larger than the limit, declared or streamed.
 
-    def __init__(self, app: ASGIApp, limit: int) -> None:
+    Snapshots uploaded with PUT have their own, larger limit.
+    """
+
+    def __init__(self, app: ASGIApp, limit: int, snapshot_limit: int) -> None:
         self.app = app
         self.limit = limit
+        self.snapshot_limit = snapshot_limit
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        limit = self.snapshot_limit if scope["method"] == "PUT" else self.limit
         declared = dict(scope["headers"]).get(b"content-length")
-        if declared is not None and declared.isdigit() and int(declared) > self.limit:
-            await self._refuse(send)
+        if declared is not None and declared.isdigit() and int(declared) > limit:
+            await self._refuse(send, limit)
             return
         seen = 0
         refused = False
@@ -35,7 +40,7 @@ class BodyLimit:
             message = await receive()
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
-                if seen > self.limit:
+                if seen > limit:
                     refused = True
                     raise _TooLarge
             return message
@@ -44,10 +49,10 @@ class BodyLimit:
             await self.app(scope, limited, send)
         except _TooLarge:
             if refused:
-                await self._refuse(send)
+                await self._refuse(send, limit)
 
-    async def _refuse(self, send: Send) -> None:
-        body = json.dumps(error_body("too_large", f"request body over {self.limit} bytes"))
+    async def _refuse(self, send: Send, limit: int) -> None:
+        body = json.dumps(error_body("too_large", f"request body over {limit} bytes"))
         await send({"type": "http.response.start", "status": 413,
                     "headers": [(b"content-type", b"application/json")]})
         await send({"type": "http.response.body", "body": body.encode()})
