@@ -166,21 +166,24 @@ class LazyTransitions:
         log_norm = self._log_norm(a, rows)
         learned = p * np.exp(self._offset[a, rows] - log_norm)
         vals = self._vals[a][rows] * learned[:, None]
-        cols = self._cols[a][rows].ravel()
-        pred = np.bincount(cols, weights=vals.ravel(), minlength=n).astype(np.float64)
+        if vals.size:
+            pred = np.bincount(self._cols[a][rows].ravel(), weights=vals.ravel(), minlength=n)
+        else:
+            pred = np.zeros(n)
         # columns j fall into k + 1 segments by how many belief rows lie below them
-        segment = np.diff(np.concatenate(([0], rows + 1, [n])))
+        edges = np.concatenate(([0], rows + 1, [n]))
+        segment = edges[1:] - edges[:-1]
         mode = self.config.expansion
         if mode == "prior":
             # sum_i c_i pad(max(i, j)) = pad(j) sum_{i<j} c_i + sum_{i>=j} c_i pad(i)
             c = p * np.exp(self._log_prior + self._created[a, n - 1] - log_norm)
             below = np.concatenate(([0.0], np.cumsum(c)))
-            weighted = np.cumsum(np.append(c * self._pad[a, rows], 0.0)[::-1])[::-1]
+            weighted = np.concatenate((np.cumsum((c * self._pad[a, rows])[::-1])[::-1], [0.0]))
             pred += self._pad[a, :n] * np.repeat(below, segment) + np.repeat(weighted, segment)
         else:
             c = p * np.exp(self._log_prior + self._created[a, rows] - log_norm)
             if mode == "zero_uniform":  # row i spreads over columns j <= i
-                pred += np.repeat(np.cumsum(np.append(c, 0.0)[::-1])[::-1], segment)
+                pred += np.repeat(np.concatenate((np.cumsum(c[::-1])[::-1], [0.0])), segment)
             else:
                 pred[rows] += c
         return pred
