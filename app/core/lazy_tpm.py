@@ -166,8 +166,9 @@ class LazyTransitions:
         log_norm = self._log_norm(a, rows)
         learned = p * np.exp(self._offset[a, rows] - log_norm)
         vals = self._vals[a][rows] * learned[:, None]
-        if vals.size:
-            pred = np.bincount(self._cols[a][rows].ravel(), weights=vals.ravel(), minlength=n)
+        if vals.size:  # weighted bincount is float64 already: asarray does not copy
+            cols = self._cols[a][rows].ravel()
+            pred = np.asarray(np.bincount(cols, weights=vals.ravel(), minlength=n), np.float64)
         else:
             pred = np.zeros(n)
         # columns j fall into k + 1 segments by how many belief rows lie below them

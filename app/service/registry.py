@@ -225,6 +225,11 @@ class ModelRegistry:
 
     # --- steps ----------------------------------------------------------------------------
 
+    @property
+    def steps_are_quick(self) -> bool:
+        """False when every step waits for the disk (fsync=always): keep it off the loop."""
+        return self.data_dir is None or self.fsync != "always"
+
     def step(self, name: str, step: Step) -> Decision:
         """One step of one model."""
         decisions = self.step_many([(name, step)])
@@ -255,6 +260,9 @@ class ModelRegistry:
                 if not lock.acquire(blocking=blocking):
                     return None
                 stack.callback(lock.release)
+                if self._models.get(name) is not models[name]:  # replaced or deleted meanwhile
+                    raise UnknownModel(f"model {name!r} was replaced or deleted; send again",
+                                       field="name")
             inputs = [_validate(models[name].shield, step, i, len(steps) > 1)
                       for i, (name, step) in enumerate(steps)]
             self._journal(models, steps)

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from pathlib import Path
 
 import pytest
 
-from app.core import ShieldConfig
-from app.service.registry import ModelRegistry, Step
+from app.core import Shield, ShieldConfig
+from app.service.registry import Model, ModelRegistry, Step, UnknownModel
 from tests.utils import assert_same, random_stream
 
 
@@ -96,3 +97,26 @@ def test_concurrent_streams_on_one_model_lose_no_update() -> None:
     counters = registry.get("default").shield.counters
     assert counters.steps == counters.model_version == 1600
     assert counters.episodes == 16 * 4
+
+
+def test_a_step_waiting_on_a_replaced_model_is_refused(tmp_path: Path) -> None:
+    registry = reopen(tmp_path)
+    old = registry.get("default")
+    outcome: list[BaseException | None] = []
+
+    def step() -> None:
+        try:
+            registry.step("default", Step([1.0, 2.0, 3.0], 0.0))
+            outcome.append(None)
+        except BaseException as error:
+            outcome.append(error)
+
+    with old.lock:  # a step of another thread looks the model up, then waits here ...
+        waiting = threading.Thread(target=step)
+        waiting.start()
+        time.sleep(0.3)
+        # ... while a PUT swaps in a new model under the same name
+        registry._models["default"] = Model("default", Shield(), None)
+    waiting.join()
+    assert isinstance(outcome[0], UnknownModel)
+    assert old.shield.counters.model_version == 0  # nothing applied to the retired model

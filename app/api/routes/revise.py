@@ -30,8 +30,9 @@ NamePath = Annotated[str, Path(pattern=r"^[a-z0-9][a-z0-9_-]{0,63}$", descriptio
 
 
 async def step_one(registry: ModelRegistry, name: str, step: Step) -> CoreDecision:
-    """Run inline when the model is free (one step on the loop), else in the threadpool."""
-    decision = registry.try_step(name, step)
+    """Run inline when the model is free and no fsync waits (one step on the loop), else in
+    the threadpool."""
+    decision = registry.try_step(name, step) if registry.steps_are_quick else None
     if decision is None:
         decision = await run_in_threadpool(registry.step, name, step)
     return decision
