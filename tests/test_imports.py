@@ -1,17 +1,36 @@
-"""The dependency rule: the core needs numpy alone, and the service never imports torch."""
+"""The dependency rule: app.core <- app.service <- app.api <- app.main; app never imports
+client; nothing of the service imports torch (its container has none)."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 
+import pytest
+
 
 def imported_after(module: str) -> set[str]:
     code = f"import sys, {module}; print('\\n'.join(sorted(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
-    return {name.split(".")[0] for name in out.stdout.split()}
+    return set(out.stdout.split())
 
 
-def test_core_imports_neither_web_nor_torch() -> None:
+def top(modules: set[str]) -> set[str]:
+    return {name.split(".")[0] for name in modules}
+
+
+def test_core_needs_numpy_alone() -> None:
     loaded = imported_after("app.core")
-    assert not loaded & {"fastapi", "pydantic", "httpx", "torch", "starlette", "client"}
+    assert not top(loaded) & {"fastapi", "pydantic", "httpx", "torch", "starlette", "client"}
+    assert not {m for m in loaded if m.startswith(("app.service", "app.api"))}
+
+
+def test_service_layer_knows_nothing_of_http() -> None:
+    loaded = imported_after("app.service.registry")
+    assert not top(loaded) & {"fastapi", "starlette", "torch", "client"}
+    assert not {m for m in loaded if m.startswith("app.api")}
+
+
+@pytest.mark.parametrize("module", ["app.main", "app.__main__"])
+def test_the_service_imports_neither_torch_nor_the_client(module: str) -> None:
+    assert not top(imported_after(module)) & {"torch", "client"}
