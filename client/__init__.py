@@ -1,1 +1,1 @@
-"""The controller side: clients of the shield service (and, later, the simulator and DDPG)."""
+"""The controller side: clients of the shield service, the car-following simulator and its data."""

@@ -1,0 +1,1 @@
+"""The car-following world: lead-vehicle speed profiles and the simulator."""
