@@ -201,6 +201,27 @@ class AsyncShieldClient:
         await self.close()
 
 
+class BatchShield:
+    """Steps over the batch route across models: one request per step here, or one request for
+    a step of every model with :meth:`revise_many` (lockstep training of several runs)."""
+
+    def __init__(self, url: str, *, token: str | None = None, model: str = "default",
+                 timeout: float = DEFAULT_TIMEOUT) -> None:
+        self.model = model
+        self._client = ShieldClient(url, token=token, timeout=timeout)
+
+    def revise(self, observation: Sequence[float], action: float | None,
+               **options: Any) -> Decision:
+        return self.revise_many([(self.model, step_body(observation, action, **options))])[0]
+
+    def revise_many(self, steps: Sequence[tuple[str, dict[str, Any]]]) -> list[Decision]:
+        """``(model, step body)`` pairs, applied in order in one request."""
+        return self._client.revise_batch([{**body, "model": model} for model, body in steps])
+
+    def close(self) -> None:
+        self._client.close()
+
+
 class ShieldSession:
     """One WebSocket connection: each step one frame, replies in order."""
 

@@ -1,0 +1,1 @@
+"""Controllers of the ego vehicle: DDPG (torch), an IDM follower, a random policy."""

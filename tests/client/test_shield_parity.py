@@ -1,0 +1,76 @@
+"""One seed, four transports, the same decisions and the same episodes."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+
+from app.core import ShieldConfig
+from client.agents.idm import PRESETS
+from client.shield import BatchShield, LocalShield, ShieldClient, ShieldSession, StepShield
+from client.shield.wrapper import ShieldWrapper
+from client.sim import lead
+from client.sim.car_following import CarFollowingEnv
+from tests.conftest import Server, start_server
+
+CONFIG: dict[str, Any] = {"reviser": {"activate_after_episodes": 3, "seed": 11}}
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    s = start_server(tmp_path_factory.mktemp("parity") / "data", "--fsync", "never")
+    yield s
+    s.stop()
+
+
+def episodes(shield: StepShield, count: int = 10) -> list[tuple[Any, ...]]:
+    env = ShieldWrapper(CarFollowingEnv(lead=lead.synthetic(2, hard_braking=True)), shield)
+    controller = PRESETS["aggressive"]
+    records: list[tuple[Any, ...]] = []
+    obs, _ = env.reset(seed=5)
+    for _ in range(count):
+        for _ in range(800):
+            obs, reward, terminated, truncated, info = env.step(
+                np.array([controller.act(obs)], np.float32))
+            records.append((info["shield"], obs.tolist(), reward))
+            if terminated or truncated:
+                records.append((info["shield_done"], info["event"]))
+                break
+        obs, _ = env.reset()
+    return records
+
+
+def transports(server: Server, name: str) -> dict[str, StepShield]:
+    with ShieldClient(server.url) as admin:
+        for transport in ("http", "ws", "batch"):
+            admin.create_model(f"{name}-{transport}", CONFIG)
+    return {
+        "local": LocalShield(ShieldConfig.from_dict(CONFIG)),
+        "http": ShieldClient(server.url, model=f"{name}-http"),
+        "ws": ShieldSession(server.url, model=f"{name}-ws"),
+        "batch": BatchShield(server.url, model=f"{name}-batch"),
+    }
+
+
+def test_all_transports_give_identical_decisions_and_episodes(server: Server) -> None:
+    shields = transports(server, "parity")
+    runs = {}
+    for transport, shield in shields.items():
+        runs[transport] = episodes(shield)
+        shield.close()
+    assert runs["local"] == runs["http"] == runs["ws"] == runs["batch"]
+    reasons = {record[0].reason for record in runs["local"]}
+    assert "revised_safety" in reasons  # the comparison covers revisions, not only passes
+
+
+def test_the_wrapper_reports_and_applies_the_decision() -> None:
+    shield = LocalShield(ShieldConfig.from_dict(CONFIG))
+    records = episodes(shield, count=6)
+    revised = [r[0] for r in records if len(r) == 3 and r[0].revised]
+    assert revised and all(d.action != d.proposed for d in revised)
+    done = [r for r in records if len(r) == 2]
+    assert len(done) == 6 and all(r[0].reason == "done" for r in done)
+    assert shield.shield.counters.episodes == 6
