@@ -16,13 +16,15 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
     The shield observes ``info["efsm_observation"]`` when the environment provides it (else the
     observation itself) and learns the failure named by ``info["event"]`` at the end of an
     episode. ``info["shield"]`` carries the decision of each step; the action applied is the
-    decision's.
+    decision's. With ``shadow`` the shield learns and reports but never changes the action.
     """
 
-    def __init__(self, env: gym.Env[Any, Any], shield: StepShield, stream: str = "0") -> None:
+    def __init__(self, env: gym.Env[Any, Any], shield: StepShield, stream: str = "0",
+                 shadow: bool = False) -> None:
         super().__init__(env)
         self.shield = shield
         self.stream = stream
+        self.shadow = shadow
         self._z: list[float] = []
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
@@ -32,7 +34,7 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         proposed = float(np.asarray(action).reshape(-1)[0])
-        decision = self.shield.revise(self._z, proposed, stream=self.stream)
+        decision = self.shield.revise(self._z, proposed, stream=self.stream, shadow=self.shadow)
         applied = np.asarray([decision.action], dtype=np.float32)
         observation, reward, terminated, truncated, info = self.env.step(applied)
         self._z = _efsm(observation, info)

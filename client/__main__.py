@@ -1,0 +1,135 @@
+"""``python -m client run | report | demo``: car-following experiments against the shield."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Annotated
+
+import httpx
+import typer
+from tqdm import tqdm
+
+from client.experiment import report, runner
+from client.experiment.records import RecordError
+from client.shield import ShieldAPIError, ShieldClient, ShieldUnavailable
+
+cli = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help=__doc__)
+
+
+def fail(message: str) -> None:
+    typer.secho(f"error: {message}", err=True, fg="red")
+    raise typer.Exit(2)
+
+
+def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, transport: str,
+               out: Path, workers: int, token: str | None, lead: str) -> str:
+    """Run, then report; every failure a user can cause becomes one line."""
+    try:
+        config = runner.ExperimentConfig(
+            arms=tuple(a.strip() for a in arms.split(",") if a.strip()), runs=runs,
+            episodes=episodes, seed=seed, shield=shield, transport=transport,  # type: ignore[arg-type]
+            lead=lead)  # type: ignore[arg-type]
+        if shield != "local":
+            with contextlib.closing(ShieldClient(shield, token=token)) as probe:
+                probe.health()
+        total = len(config.arms) * runs * episodes
+        with tqdm(total=total, desc="episodes", unit="ep", disable=None) as bar:
+            runner.run_all(config, out, workers, token, bar)
+        text, _ = report.write(out)
+    except (ValueError, RecordError, ShieldUnavailable, ShieldAPIError) as error:
+        fail(str(error))
+    return text
+
+
+@cli.command()
+def run(
+    arms: Annotated[str, typer.Option(help="Comma-separated: ddpg, idm, idm-aggressive, "
+                                            "random, each optionally +shield or +shadow.")]
+    = "ddpg,ddpg+shield",
+    runs: Annotated[int, typer.Option(min=1)] = 10,
+    episodes: Annotated[int, typer.Option(min=1)] = 1500,
+    seed: Annotated[int, typer.Option(help="Base seed; runs get seeds spawned from it.")] = 1000,
+    shield: Annotated[str, typer.Option(help="'local' or the URL of a shield service.")]
+    = "local",
+    transport: Annotated[str, typer.Option(help="http, ws or batch (remote shields).")] = "ws",
+    out: Annotated[Path, typer.Option(help="Records, summary, table and figure go here.")]
+    = Path("runs/experiment"),
+    workers: Annotated[int, typer.Option(min=1, help="Runs in parallel processes.")]
+    = max(1, os.cpu_count() or 1),
+    token: Annotated[str | None, typer.Option(envvar="SHIELD_TOKEN")] = None,
+    lead: Annotated[str, typer.Option(help="train, evaluation, epa or synthetic.")] = "train",
+) -> None:
+    """Run arms x runs x episodes (resumable: run it again to continue), then report."""
+    typer.echo(experiment(arms, runs, episodes, seed, shield, transport, out, workers, token,
+                          lead))
+    typer.echo(f"\nrecords, summary.json, table.md and figure.png in {out}")
+
+
+@cli.command("report")
+def report_command(directory: Path) -> None:
+    """The paper's table and figure from the records in DIRECTORY."""
+    try:
+        text, _ = report.write(directory)
+    except RecordError as error:
+        fail(str(error))
+    typer.echo(text)
+    typer.echo(f"\nsummary.json, table.md and figure.png in {directory}")
+
+
+@contextlib.contextmanager
+def service(data_dir: Path) -> Iterator[str]:
+    """The shield service as its own process on a free local port."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    url = f"http://127.0.0.1:{port}"
+    log = open(data_dir.parent / "shield.log", "wb")
+    process = subprocess.Popen(
+        [sys.executable, "-m", "app", "serve", "--port", str(port), "--data-dir", str(data_dir),
+         "--fsync", "never", "--log-level", "warning"], stdout=log, stderr=subprocess.STDOUT)
+    try:
+        for _ in range(300):
+            if process.poll() is not None:
+                fail(f"the shield service exited; see {log.name}")
+            try:
+                if httpx.get(url + "/readyz", timeout=1).status_code == 200:
+                    break
+            except httpx.TransportError:
+                time.sleep(0.1)
+        yield url
+    finally:
+        process.terminate()
+        process.wait(10)
+        log.close()
+
+
+@cli.command()
+def demo(
+    runs: Annotated[int, typer.Option(min=1)] = 2,
+    episodes: Annotated[int, typer.Option(min=1)] = 200,
+    seed: int = 1000,
+    out: Path = Path("runs/demo"),
+    transport: str = "ws",
+    workers: Annotated[int, typer.Option(min=1)] = max(1, os.cpu_count() or 1),
+) -> None:
+    """Start the shield service, train DDPG with and without it over the network, report."""
+    out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=out) as tmp, service(Path(tmp) / "data") as url:
+        typer.echo(f"shield service at {url}; {runs} runs x {episodes} episodes per arm")
+        text = experiment("ddpg,ddpg+shield", runs, episodes, seed, url, transport, out,
+                          workers, None, "train")
+    typer.echo(text)
+    typer.echo(f"\nfigure: {out / 'figure.png'}; records and summary.json in {out}")
+
+
+if __name__ == "__main__":
+    cli()

@@ -1,0 +1,106 @@
+"""Per-episode records: one JSON Lines file per (arm, run), appended as episodes finish.
+
+The first line of every file is a header with the full configuration, the versions and the
+run's seed; every other line is one :class:`EpisodeRecord`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """What one episode did."""
+
+    arm: str
+    run: int
+    episode: int  # 1-based
+    seed: int  # the run's seed
+    steps: int
+    outcome: str  # success, collision or large_distance
+    interventions: dict[str, int] = field(default_factory=dict)
+    revisions_would: int = 0  # shadow mode: decisions that would have been revised
+    speed_diff_n: int = 0  # |v_ego - v_lead| over the episode's steps: count, mean, variance
+    speed_diff_mean: float = 0.0
+    speed_diff_var: float = 0.0
+    episode_return: float = 0.0
+    n_states: int = 0
+    wall_s: float = 0.0
+
+
+class RecordError(Exception):
+    """A record file is missing, damaged or from another configuration."""
+
+
+def path_for(directory: Path, arm: str, run: int) -> Path:
+    return directory / "records" / f"{arm.replace('+', '_')}__run{run:02d}.jsonl"
+
+
+def start(path: Path, header: dict[str, Any]) -> list[EpisodeRecord]:
+    """Open a run's file: create it with the header, or read the episodes it already holds.
+
+    An existing file must carry the same ``identity`` (the configuration less where the
+    shield runs and how it is reached, which change no result) else :class:`RecordError`.
+    """
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "w") as f:
+            f.write(json.dumps({"header": header}) + "\n")
+        return []
+    data = path.read_bytes()
+    if not data.endswith(b"\n"):  # a torn last line (a crash mid-write): cut it off
+        with open(path, "r+b") as f:
+            f.truncate(data.rfind(b"\n") + 1)
+    existing_header, records = read(path)
+    if existing_header.get("identity") != header.get("identity"):
+        raise RecordError(f"{path}: written with another configuration; use another --out")
+    return records
+
+
+def append(path: Path, record: EpisodeRecord) -> None:
+    """Add one episode, durably (flush and fsync)."""
+    with open(path, "a") as f:
+        f.write(json.dumps(asdict(record)) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def read(path: Path) -> tuple[dict[str, Any], list[EpisodeRecord]]:
+    """The header and the episodes of one file; a torn last line is ignored."""
+    try:
+        lines = path.read_text().split("\n")
+    except OSError as error:
+        raise RecordError(f"{path}: {error.strerror}") from error
+    try:
+        header = json.loads(lines[0])["header"]
+    except (ValueError, KeyError, TypeError) as error:
+        raise RecordError(f"{path}: no header line; not a record file") from error
+    records = []
+    for number, line in enumerate(lines[1:], start=2):
+        if not line:
+            continue
+        try:
+            records.append(EpisodeRecord(**json.loads(line)))
+        except (ValueError, TypeError) as error:
+            if number == len(lines):  # an unterminated last line: a crash mid-write
+                break
+            raise RecordError(f"{path}: line {number} is damaged") from error
+    return header, records
+
+
+def read_all(directory: Path) -> tuple[list[dict[str, Any]], list[EpisodeRecord]]:
+    """Every header and episode under ``directory/records``."""
+    files = sorted((directory / "records").glob("*.jsonl"))
+    if not files:
+        raise RecordError(f"{directory}: no record files under records/")
+    headers, episodes = [], []
+    for path in files:
+        header, records = read(path)
+        headers.append(header)
+        episodes.extend(records)
+    return headers, episodes

@@ -1,0 +1,133 @@
+"""The paper's table and figure from the records of an experiment (section 5, Table 1, Fig. 3)."""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from client.experiment.records import EpisodeRecord, RecordError, read_all
+
+FAILURES = ("large_distance", "collision")
+
+
+def pooled(records: list[EpisodeRecord]) -> tuple[float | None, float | None]:
+    """Mean and variance of |v_ego - v_lead| over all steps of the given episodes."""
+    n = np.array([r.speed_diff_n for r in records], dtype=np.float64)
+    if n.sum() == 0:
+        return None, None
+    mean = np.array([r.speed_diff_mean for r in records])
+    var = np.array([r.speed_diff_var for r in records])
+    total = float((n * mean).sum() / n.sum())
+    return total, float((n * (var + mean**2)).sum() / n.sum() - total**2)
+
+
+def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
+    """Per arm: the table's counts, the episode after which each run never fails, speed
+    differences over successful episodes, and interventions."""
+    by_arm: dict[str, list[EpisodeRecord]] = defaultdict(list)
+    for record in episodes:
+        by_arm[record.arm].append(record)
+    summary: dict[str, Any] = {}
+    for arm, records in by_arm.items():
+        runs = sorted({r.run for r in records})
+        last_failure = {run: max((r.episode for r in records
+                                  if r.run == run and r.outcome in FAILURES), default=0)
+                        for run in runs}
+        successes = [r for r in records if r.outcome == "success"]
+        mean, var = pooled(successes)
+        interventions: dict[str, int] = defaultdict(int)
+        for r in records:
+            for criterion, count in r.interventions.items():
+                interventions[criterion] += count
+        summary[arm] = {
+            "runs": len(runs),
+            "seeds": sorted({r.seed for r in records}),
+            "episodes": len(records),
+            "successes": len(successes),
+            "success_rate": len(successes) / len(records),
+            "large_distance": sum(r.outcome == "large_distance" for r in records),
+            "collision": sum(r.outcome == "collision" for r in records),
+            "never_fails_after": max(last_failure.values()),
+            "never_fails_after_per_run": [last_failure[run] for run in runs],
+            "speed_difference_mean": mean,
+            "speed_difference_variance": var,
+            "interventions": dict(interventions),
+            "revisions_in_shadow": sum(r.revisions_would for r in records),
+        }
+    return summary
+
+
+def table(summary: dict[str, Any]) -> str:
+    """The paper's Table 1 per arm, as Markdown."""
+    lines = [
+        "| arm | runs | episodes | success | large distance | collision | no failure after "
+        "episode | speed difference mean | variance | interventions |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    def number(x: float | None) -> str:
+        return "-" if x is None else f"{x:.4f}"
+
+    for arm, s in summary.items():
+        lines.append(
+            f"| {arm} | {s['runs']} | {s['episodes']} | {s['successes']} "
+            f"({100 * s['success_rate']:.1f}%) | {s['large_distance']} | {s['collision']} "
+            f"| {s['never_fails_after']} | {number(s['speed_difference_mean'])} "
+            f"| {number(s['speed_difference_variance'])} | {sum(s['interventions'].values())} |")
+    return "\n".join(lines)
+
+
+def figure(episodes: list[EpisodeRecord], path: Path) -> None:
+    """Steps per episode (mean and range over runs) and interventions per episode, per arm."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (steps_ax, revisions_ax) = plt.subplots(1, 2, figsize=(12, 4.2))
+    for index, arm in enumerate(sorted({r.arm for r in episodes})):
+        colour = f"C{index}"
+        rows = [r for r in episodes if r.arm == arm]
+        runs = sorted({r.run for r in rows})
+        length = max(r.episode for r in rows)
+        steps = np.full((len(runs), length), np.nan)
+        revisions = np.full((len(runs), length), np.nan)
+        for r in rows:
+            steps[runs.index(r.run), r.episode - 1] = r.steps
+            revisions[runs.index(r.run), r.episode - 1] = sum(r.interventions.values())
+        x = np.arange(1, length + 1)
+        steps_ax.plot(x, np.nanmean(steps, axis=0), label=arm, linewidth=1, color=colour)
+        steps_ax.fill_between(x, np.nanmin(steps, axis=0), np.nanmax(steps, axis=0),
+                              color=colour, alpha=0.15)
+        if np.nansum(revisions) > 0:
+            revisions_ax.plot(x, np.nanmean(revisions, axis=0), label=arm, linewidth=1,
+                              color=colour)
+    steps_ax.set(xlabel="episode", ylabel="steps (800 = success)",
+                 title="Steps per episode: mean, range over runs")
+    revisions_ax.set(xlabel="episode", ylabel="revised actions",
+                     title="Interventions per episode (mean over runs)")
+    for ax in (steps_ax, revisions_ax):
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def write(directory: Path) -> tuple[str, dict[str, Any]]:
+    """summary.json, table.md and figure.png next to the records; returns the table."""
+    headers, episodes = read_all(directory)
+    if not episodes:
+        raise RecordError(f"{directory}: the record files hold no episode yet")
+    summary = summarise(episodes)
+    summary_doc = {"arms": summary, "config": headers[0]["config"],
+                   "versions": headers[0]["versions"]}
+    (directory / "summary.json").write_text(json.dumps(summary_doc, indent=2))
+    text = table(summary)
+    (directory / "table.md").write_text(text + "\n")
+    figure(episodes, directory / "figure.png")
+    return text, summary

@@ -1,0 +1,129 @@
+"""Runner, records and report: resumable runs, the paper's numbers, one clear line per error."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from client.agents.ddpg import DDPG, DDPGConfig
+from client.experiment import records, report, runner
+from client.experiment.records import EpisodeRecord
+from tests.conftest import free_port
+
+CONFIG = runner.ExperimentConfig(arms=("idm-aggressive", "idm-aggressive+shield"), runs=1,
+                                 episodes=8, seed=3, lead="synthetic",
+                                 shield_config={"reviser": {"activate_after_episodes": 2}})
+
+
+def without_wall(rs: list[EpisodeRecord]) -> list[EpisodeRecord]:
+    return [dataclasses.replace(r, wall_s=0.0) for r in rs]
+
+
+def test_an_interrupted_run_resumes_without_losing_or_duplicating(tmp_path: Path) -> None:
+    whole, broken = tmp_path / "whole", tmp_path / "broken"
+    arm = "idm-aggressive+shield"
+    assert runner.run_one(CONFIG, arm, 0, whole) == 8
+    runner.run_one(CONFIG, arm, 0, broken)
+    path = records.path_for(broken, arm, 0)
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines[:4]) + lines[4][:25])  # 3 episodes and a torn fourth
+    assert len(records.read(path)[1]) == 3
+    assert runner.run_one(CONFIG, arm, 0, broken) == 5
+    expected = without_wall(records.read(records.path_for(whole, arm, 0))[1])
+    assert without_wall(records.read(path)[1]) == expected
+    assert runner.run_one(CONFIG, arm, 0, broken) == 0  # complete: nothing to do
+
+
+def test_records_from_another_configuration_are_refused(tmp_path: Path) -> None:
+    runner.run_one(CONFIG, "idm-aggressive", 0, tmp_path)
+    other = dataclasses.replace(CONFIG, seed=4)
+    with pytest.raises(records.RecordError, match="another configuration"):
+        runner.run_one(other, "idm-aggressive", 0, tmp_path)
+
+
+def record(run: int, episode: int, outcome: str, n: int = 10, mean: float = 1.0,
+           var: float = 0.0) -> EpisodeRecord:
+    return EpisodeRecord(arm="a", run=run, episode=episode, seed=run, steps=n, outcome=outcome,
+                         speed_diff_n=n, speed_diff_mean=mean, speed_diff_var=var,
+                         interventions={"collision": 1} if outcome == "success" else {})
+
+
+def test_summary_numbers_by_hand() -> None:
+    rows = [record(0, 1, "collision"), record(0, 2, "success", 10, 1.0, 0.5),
+            record(0, 3, "success", 30, 3.0, 1.0), record(1, 1, "large_distance"),
+            record(1, 2, "success", 20, 2.0, 0.0), record(1, 3, "collision")]
+    s = report.summarise(rows)["a"]
+    assert (s["episodes"], s["successes"], s["large_distance"], s["collision"]) == (6, 3, 1, 2)
+    assert s["never_fails_after_per_run"] == [1, 3] and s["never_fails_after"] == 3
+    # pooled over 60 steps: mean (10*1 + 30*3 + 20*2) / 60; E[x^2] from each episode's
+    mean = (10 * 1 + 30 * 3 + 20 * 2) / 60
+    second = (10 * (0.5 + 1) + 30 * (1 + 9) + 20 * (0 + 4)) / 60
+    assert s["speed_difference_mean"] == pytest.approx(mean)
+    assert s["speed_difference_variance"] == pytest.approx(second - mean**2)
+    assert s["interventions"] == {"collision": 3}
+    assert "| a | 2 | 6 | 3 (50.0%) | 1 | 2 | 3 |" in report.table({"a": s})
+
+
+def test_report_writes_summary_table_and_figure(tmp_path: Path) -> None:
+    runner.run_one(CONFIG, "idm-aggressive", 0, tmp_path)
+    text, summary = report.write(tmp_path)
+    assert summary["idm-aggressive"]["episodes"] == 8
+    for name in ("summary.json", "table.md", "figure.png"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert text.splitlines()[2].startswith("| idm-aggressive |")
+
+
+def test_ddpg_is_deterministic_for_a_seed() -> None:
+    def train(seed: int) -> list[float]:
+        torch.set_num_threads(1)
+        agent = DDPG(DDPGConfig(warmup=32), seed)
+        rng = np.random.default_rng(0)
+        for _ in range(80):
+            obs = rng.uniform(0, 30, 4).astype(np.float32)
+            agent.remember(obs, agent.act(obs), -1.0, obs, False)
+            agent.update()
+        probe = np.array([10.0, 40.0, 12.0, 0.0], np.float32)
+        return [agent.act(probe, explore=False), agent.act(probe)]
+
+    assert train(1) == train(1)
+    assert train(1) != train(2)
+
+
+def cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "client", *args], capture_output=True,
+                          text=True, timeout=120)
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("run", "--arms", "ddpg,teleport"), "unknown arm 'teleport'"),
+    (("run", "--shield", "http://127.0.0.1:{port}", "--episodes", "1"), "unreachable"),
+    (("report", "{tmp}/nothing"), "no record files"),
+])
+def test_user_errors_are_one_clear_line(tmp_path: Path, args: tuple[str, ...],
+                                        message: str) -> None:
+    args = tuple(a.format(port=free_port(), tmp=tmp_path) for a in args)
+    result = cli(*args, "--out", str(tmp_path / "out")) if args[0] == "run" else cli(*args)
+    assert result.returncode == 2
+    assert message in result.stderr and "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_corrupt_record_file_is_one_clear_line(tmp_path: Path) -> None:
+    (tmp_path / "records").mkdir()
+    (tmp_path / "records" / "x__run00.jsonl").write_text("not json\n")
+    result = cli("report", str(tmp_path))
+    assert result.returncode == 2 and "not a record file" in result.stderr
+
+
+def test_run_command_end_to_end(tmp_path: Path) -> None:
+    result = cli("run", "--arms", "idm,idm+shadow", "--runs", "2", "--episodes", "3",
+                 "--lead", "synthetic", "--workers", "2", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert "| idm+shadow | 2 | 6 |" in result.stdout
+    assert len(list((tmp_path / "records").glob("*.jsonl"))) == 4
