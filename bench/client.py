@@ -1,0 +1,136 @@
+"""The client's costs: simulator steps, a DDPG update, and shielded training per transport.
+
+* simulator steps per second alone (random actions);
+* one DDPG update (batch 64, the configured networks), single-threaded torch;
+* the wall time of the same shielded DDPG training (seed 0, the reviser active from the start
+  so every step is inspected) in-process and over WebSocket, HTTP and the batch route of a
+  shield service in its own process, as ratios to in-process.
+
+Medians over rounds.
+
+    python bench/client.py --rounds 3 --episodes 8
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from app.core import ShieldConfig  # noqa: E402
+from client.__main__ import service  # noqa: E402
+from client.agents.ddpg import DDPG, DDPGConfig  # noqa: E402
+from client.experiment.runner import play  # noqa: E402
+from client.shield import (  # noqa: E402
+    BatchShield,
+    LocalShield,
+    ShieldClient,
+    ShieldSession,
+    StepShield,
+)
+from client.shield.wrapper import ShieldWrapper  # noqa: E402
+from client.sim import lead  # noqa: E402
+from client.sim.car_following import CarFollowingEnv  # noqa: E402
+
+SHIELD = {"reviser": {"activate_after_episodes": 0}}
+
+
+def simulator_steps_per_second(steps: int = 20_000) -> float:
+    env = CarFollowingEnv(lead=lead.cmap("train"))
+    env.reset(seed=0)
+    actions = np.random.default_rng(0).uniform(-2, 2, steps).astype(np.float32)
+    start = time.perf_counter()
+    for a in actions:
+        *_, terminated, truncated, _ = env.step(a[None])
+        if terminated or truncated:
+            env.reset()
+    return steps / (time.perf_counter() - start)
+
+
+def ddpg_update_ms(updates: int = 500) -> float:
+    agent = DDPG(DDPGConfig(warmup=64), 0)
+    rng = np.random.default_rng(0)
+    for _ in range(1000):
+        obs = rng.uniform(0, 30, 4).astype(np.float32)
+        agent.remember(obs, 0.0, -1.0, obs, False)
+    agent.update()
+    start = time.perf_counter()
+    for _ in range(updates):
+        agent.update()
+    return (time.perf_counter() - start) / updates * 1e3
+
+
+def training(shield: StepShield, episodes: int) -> tuple[float, int]:
+    """Seconds and steps of a shielded DDPG training."""
+    env = ShieldWrapper(CarFollowingEnv(lead=lead.cmap("train")), shield)
+    agent = DDPG(DDPGConfig(warmup=256), 0)
+    obs, _ = env.reset(seed=0)
+    steps = 0
+    start = time.perf_counter()
+    for _ in range(episodes):
+        measured, obs = play(env, agent, obs, agent)
+        steps += measured["steps"]
+        obs, _ = env.reset()
+    return time.perf_counter() - start, steps
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--episodes", type=int, default=8)
+    parser.add_argument("--json")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+
+    sim = statistics.median(simulator_steps_per_second() for _ in range(args.rounds))
+    update = statistics.median(ddpg_update_ms() for _ in range(args.rounds))
+    times: dict[str, list[float]] = {"in-process": [], "ws": [], "http": [], "batch": []}
+    steps: dict[str, int] = {}
+    with service(Path("runs/bench-client")) as url:
+        for r in range(args.rounds):
+            with ShieldClient(url) as admin:
+                for t in ("ws", "http", "batch"):
+                    name = f"bench-{t}-{r}"
+                    admin.create_model(name, SHIELD)
+            shields: dict[str, StepShield] = {
+                "in-process": LocalShield(ShieldConfig.from_dict(SHIELD)),
+                "ws": ShieldSession(url, model=f"bench-ws-{r}"),
+                "http": ShieldClient(url, model=f"bench-http-{r}"),
+                "batch": BatchShield(url, model=f"bench-batch-{r}"),
+            }
+            for name, shield in shields.items():
+                seconds, n = training(shield, args.episodes)
+                shield.close()
+                times[name].append(seconds)
+                steps[name] = n
+    base = statistics.median(times["in-process"])
+    results: dict[str, Any] = {"simulator_steps_per_s": sim, "ddpg_update_ms": update,
+                               "training": {}}
+    print(f"\nseed 0; {args.rounds} rounds; {args.episodes} training episodes each; "
+          f"{platform.machine()}, Python {platform.python_version()}, torch "
+          f"{torch.__version__} (1 thread)\n")
+    print(f"simulator alone: {sim:,.0f} steps per second")
+    print(f"DDPG update (batch 64, 64x64 networks): {update:.2f} ms\n")
+    print("| shield reached | training wall time (s) | steps | vs in-process |")
+    print("|---|---:|---:|---:|")
+    for name, values in times.items():
+        median = statistics.median(values)
+        results["training"][name] = {"seconds": median, "steps": steps[name],
+                                     "ratio": median / base}
+        print(f"| {name} | {median:.1f} | {steps[name]} | {median / base:.2f}x |")
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=2))
+
+
+if __name__ == "__main__":
+    main()

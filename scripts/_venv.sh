@@ -1,0 +1,14 @@
+# Sourced by scripts/test and scripts/demo: make .venv and install the project into it, once
+# per change of pyproject.toml. torch is pinned to 2.13.0 (the CPU build).
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+python=${PYTHON:-python3}
+stamp=.venv/.installed
+want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+if [ ! -x .venv/bin/python ]; then
+    "$python" -m venv .venv
+fi
+if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+    .venv/bin/python -m pip install --quiet --upgrade pip
+    .venv/bin/python -m pip install --quiet -e ".[service,client,dev]"
+    echo "$want" >"$stamp"
+fi
