@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -74,3 +75,28 @@ def test_the_wrapper_reports_and_applies_the_decision() -> None:
     done = [r for r in records if len(r) == 2]
     assert len(done) == 6 and all(r[0].reason == "done" for r in done)
     assert shield.shield.counters.episodes == 6
+
+
+@pytest.mark.parametrize("transport", ["http", "ws", "batch"])
+def test_runner_records_are_identical_in_process_and_over_the_network(
+    server: Server, transport: str, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    import dataclasses
+
+    from client.experiment import records, runner
+
+    config = runner.ExperimentConfig(
+        arms=("idm-aggressive+shield",), runs=1, episodes=5, seed=21, lead="synthetic",
+        shield_config={"reviser": {"activate_after_episodes": 1}},
+        model_prefix=f"runner-{transport}")
+    local_dir, remote_dir = tmp_path_factory.mktemp("local"), tmp_path_factory.mktemp("remote")
+    runner.run_one(config, config.arms[0], 0, local_dir)
+    remote = dataclasses.replace(config, shield=server.url, transport=transport)  # type: ignore[arg-type]
+    runner.run_one(remote, config.arms[0], 0, remote_dir)
+
+    def episodes(directory: Path) -> list[object]:
+        return [dataclasses.replace(r, wall_s=0.0)
+                for r in records.read(records.path_for(directory, config.arms[0], 0))[1]]
+
+    assert episodes(local_dir) == episodes(remote_dir)
+    assert sum(sum(r.interventions.values()) for r in episodes(local_dir)) > 0  # type: ignore[attr-defined]
