@@ -268,16 +268,18 @@ class Shield:
 
         if step.done:
             self.counters.episodes += 1
+            closing = self._closing(step, recognised, update.is_new, state.step)
             if cfg.transitions.across_episodes:  # A13 literal: the next reset is learned
                 state.belief, state.step = belief, 0
             else:
                 del self.streams[step.stream]
-            return self._closing(step, recognised, update.is_new, state.step)
+            return closing
 
         decision = self._decide(step, belief, recognised, update.is_new, state.step, self._rng)
+        assert decision.action is not None and step.action is not None
         state.belief = belief
-        state.applied_bin = actions.encode(decision.action, cfg.action)  # type: ignore[arg-type]
-        state.proposed_bin = actions.encode(step.action, cfg.action)  # type: ignore[arg-type]
+        state.applied_bin = actions.encode(decision.action, cfg.action)
+        state.proposed_bin = actions.encode(step.action, cfg.action)
         state.step += 1
         if decision.revised and not decision.shadow:
             self.counters.interventions[decision.verdict] += 1

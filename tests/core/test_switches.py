@@ -181,7 +181,7 @@ def test_a13_across_episodes_learns_the_reset_transition() -> None:
     for across in (False, True):
         shield = shield_with(transitions=TransitionConfig(across_episodes=across))
         shield.step([0.2], 1.5)
-        shield.step([0.2], None, done=True)
+        assert shield.step([0.2], None, done=True).step == 1
         before = shield.transitions.matrix(17).copy()
         shield.step([0.2], 0.0)
         changed[across] = not np.array_equal(before, shield.transitions.matrix(17))
