@@ -246,3 +246,11 @@ def test_openapi_documents_every_request_field(client: TestClient) -> None:
         assert field.get("description"), name
     assert request.get("examples")
     assert "/models/{name}/revise/batch" in schema["paths"]
+
+
+def test_the_default_model_takes_its_configuration_from_a_file(tmp_path: Any) -> None:
+    path = tmp_path / "shield.json"
+    path.write_text(json.dumps({"clustering": {"epsilon": 0.1}, "reviser": {"seed": 9}}))
+    with TestClient(create_app(Settings(config=path))) as c:
+        config = c.get("/model", params={"tpm": "none", "exact": False}).json()["config"]
+    assert config["clustering"]["epsilon"] == 0.1 and config["reviser"]["seed"] == 9
