@@ -13,7 +13,7 @@ import app
 from app.api import errors
 from app.api.metrics import AppMetrics
 from app.api.middleware import BodyLimit, Metrics
-from app.api.routes import models, ops, revise, stream
+from app.api.routes import models, ops, revise, stream, watch
 from app.core import ShieldConfig
 from app.service.registry import ModelRegistry
 from app.settings import Settings, get_settings
@@ -54,7 +54,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     api.state.registry = registry
     api.state.metrics = AppMetrics(registry)
     errors.install(api)
-    for router in (revise.router, models.router, stream.router, ops.router):
+    for router in (revise.router, models.router, stream.router, ops.router, watch.router):
         api.include_router(router)
     api.add_middleware(BodyLimit, limit=settings.max_body_bytes,
                        snapshot_limit=settings.max_snapshot_bytes)

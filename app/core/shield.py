@@ -412,6 +412,27 @@ class Shield:
             "support": self.clusterer.support,
         }
 
+    def state_view(self, index: int) -> dict[str, Any]:
+        """One state: centre in physical units, spread, flag, visits."""
+        names = [None] + [c.name for c in self.config.criteria]
+        return {
+            "index": index,
+            "centre": [float(v) for v in self._low + self.clusterer.centres[index] * self._range],
+            "spread": float(np.sqrt(self.clusterer.variances()[index])),
+            "flag": names[int(self.flags.flags[index])],
+            "visits": int(self.flags.visits[index]),
+        }
+
+    def next_states(self, index: int, top: int = 5) -> list[list[tuple[int, float]]]:
+        """For each action, the ``top`` most likely next states of ``index`` (row of Eq. 2)."""
+        one_hot = Belief(np.array([index]), np.array([1.0]))
+        out = []
+        for a in range(self.config.action.n_bins):
+            row = self.transitions.predict(one_hot, a, True)  # P^T e_i = row i
+            best = np.argsort(-row, kind="stable")[:top]
+            out.append([(int(j), float(row[j])) for j in best])
+        return out
+
     def snapshot(self) -> dict[str, Any]:
         """Everything the model is, as plain data and numpy arrays."""
         return {

@@ -9,10 +9,11 @@ nothing.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import re
 import threading
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,6 +57,11 @@ class Model:
     store: ModelStore | None
     lock: threading.Lock = field(default_factory=threading.Lock)
     since_snapshot: int = 0
+    watchers: list[Watcher] = field(default_factory=list)
+
+
+Watcher = Callable[[dict[str, Any]], None]
+"""Called with each step's event, from the thread that applied the step; must not block."""
 
 
 @dataclass(frozen=True)
@@ -268,10 +274,33 @@ class ModelRegistry:
             self._journal(models, steps)
             decisions = [models[name].shield.apply(inp)
                          for (name, _), inp in zip(steps, inputs, strict=True)]
+            for (name, step), decision in zip(steps, decisions, strict=True):
+                if models[name].watchers:  # nobody watching: this check is all it costs
+                    self._publish(models[name], step, decision)
             for model in models.values():
                 if model.store is not None and model.since_snapshot >= self.snapshot_every:
                     self._snapshot(model)
         return decisions
+
+    def watch(self, name: str, watcher: Watcher) -> Callable[[], None]:
+        """Call ``watcher`` with every step of a model from now on; returns the unsubscribe."""
+        model = self.get(name)
+        model.watchers.append(watcher)
+        return lambda: model.watchers.remove(watcher)
+
+    @staticmethod
+    def _publish(model: Model, step: Step, decision: Decision) -> None:
+        event: dict[str, Any] = {
+            "type": "step",
+            "decision": codec.to_json(dataclasses.asdict(decision)),
+            "observation": list(step.observation),
+            "event": step.event,
+            "learn": step.learn,
+        }
+        if decision.new_state or (step.event and decision.state is not None):
+            event["state"] = model.shield.state_view(decision.state)  # type: ignore[arg-type]
+        for watcher in list(model.watchers):
+            watcher(event)
 
     def _journal(self, models: dict[str, Model], steps: Iterable[tuple[str, Step]]) -> None:
         grouped: dict[str, list[dict[str, Any]]] = {}
