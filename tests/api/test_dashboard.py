@@ -1,8 +1,9 @@
 """The dashboard in a real browser (Debian's Chromium driven by Playwright) against a real
-server fed by a stream of steps."""
+server fed by a stream of steps. ``UPDATE_SCREENSHOTS=1`` writes the screenshot to docs/."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import time
 from collections.abc import Iterator
@@ -38,7 +39,7 @@ def feed(url: str, seed: int, steps: int) -> None:
                           stream=f"car-{seed}")
 
 
-def test_the_dashboard_follows_the_model_live(server: Server) -> None:
+def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) -> None:
     feed(server.url, 0, 150)
     with playwright.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
@@ -79,8 +80,9 @@ def test_the_dashboard_follows_the_model_live(server: Server) -> None:
         assert f"#{index}" in page.locator("#picked").inner_text()
 
         page.wait_for_timeout(300)
-        DOCS.mkdir(exist_ok=True)
-        page.screenshot(path=str(DOCS / "dashboard.png"), full_page=True)
+        shots = DOCS if os.environ.get("UPDATE_SCREENSHOTS") else tmp_path
+        page.screenshot(path=str(shots / "dashboard.png"), full_page=True)
+        assert (shots / "dashboard.png").stat().st_size > 10_000
         browser.close()
     assert errors == []
 
