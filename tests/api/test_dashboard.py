@@ -3,6 +3,7 @@ server fed by a stream of steps. ``UPDATE_SCREENSHOTS=1`` writes the screenshot 
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import time
@@ -78,6 +79,14 @@ def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) ->
         page.wait_for_selector("#next-states")
         assert page.locator("#next-states tbody tr").count() == 20
         assert f"#{index}" in page.locator("#picked").inner_text()
+
+        # the snapshot downloads carry the exact state (JSON) and a NumPy archive
+        with page.expect_download() as download:
+            page.click("#download-json")
+        assert "exact" in json.loads(Path(download.value.path()).read_text())
+        with page.expect_download() as download:
+            page.click("#download-npz")
+        assert Path(download.value.path()).read_bytes()[:2] == b"PK"  # a zip archive
 
         page.wait_for_timeout(300)
         shots = DOCS if os.environ.get("UPDATE_SCREENSHOTS") else tmp_path
