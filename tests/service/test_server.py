@@ -162,3 +162,30 @@ def test_the_container_command_runs_outside_docker(tmp_path: Path) -> None:
     finally:
         process.terminate()
         process.wait(10)
+
+
+def test_a_long_batch_on_one_model_does_not_stall_another(live_server: Server) -> None:
+    with ShieldClient(live_server.url) as admin:
+        admin.create_model("busy")
+        admin.create_model("quiet")
+    steps = [{"observation": z, "action": None if d else a, "done": d}
+             for z, a, d in random_stream(3, 4096)]
+    finished = threading.Event()
+
+    def long_batch() -> None:
+        with ShieldClient(live_server.url, model="busy", timeout=120) as busy:
+            busy.revise_batch(steps)
+        finished.set()
+
+    worker = threading.Thread(target=long_batch)
+    worker.start()
+    latencies = []
+    with ShieldClient(live_server.url, model="quiet") as quiet:
+        time.sleep(0.2)  # the batch is under way
+        while not finished.is_set():
+            start = time.perf_counter()
+            quiet.revise([10.0, 50.0, 12.0], 0.5)
+            latencies.append(time.perf_counter() - start)
+    worker.join()
+    assert len(latencies) > 20  # the quiet model kept answering during the whole batch
+    assert max(latencies) < 0.25  # never waited for the other model's batch
