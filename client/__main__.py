@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import socket
 import subprocess
@@ -17,6 +18,7 @@ import httpx
 import typer
 from tqdm import tqdm
 
+from app.core import ShieldConfig, ShieldError
 from client.experiment import report, runner
 from client.experiment.records import RecordError
 from client.shield import ShieldAPIError, ShieldClient, ShieldUnavailable
@@ -31,13 +33,16 @@ def fail(message: str) -> NoReturn:
 
 
 def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, transport: str,
-               out: Path, workers: int, token: str | None, lead: str) -> str:
+               out: Path, workers: int, token: str | None, lead: str,
+               shield_config: str = "{}") -> str:
     """Run, then report; every failure a user can cause becomes one line."""
     try:
+        overrides = json.loads(shield_config)
+        ShieldConfig.from_dict(overrides)  # refuse a bad configuration before any run starts
         config = runner.ExperimentConfig(
             arms=tuple(a.strip() for a in arms.split(",") if a.strip()), runs=runs,
             episodes=episodes, seed=seed, shield=shield, transport=transport,  # type: ignore[arg-type]
-            lead=lead)  # type: ignore[arg-type]
+            lead=lead, shield_config=overrides)  # type: ignore[arg-type]
         if shield != "local":
             with contextlib.closing(ShieldClient(shield, token=token)) as probe:
                 probe.health()
@@ -45,6 +50,8 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
         with tqdm(total=total, desc="episodes", unit="ep", disable=None) as bar:
             runner.run_all(config, out, workers, token, bar)
         text, _ = report.write(out)
+    except ShieldError as error:
+        fail(f"shield configuration: {error.field}: {error.message}")
     except (ValueError, RecordError, ShieldUnavailable, ShieldAPIError) as error:
         fail(str(error))
     return text
@@ -67,10 +74,13 @@ def run(
     = max(1, os.cpu_count() or 1),
     token: Annotated[str | None, typer.Option(envvar="SHIELD_TOKEN")] = None,
     lead: Annotated[str, typer.Option(help="train, evaluation, epa or synthetic.")] = "train",
+    shield_config: Annotated[str, typer.Option(
+        help='Overrides of the shield configuration as JSON, e.g. '
+             '\'{"reviser": {"inspect": "first_index"}}\' (ablations).')] = "{}",
 ) -> None:
     """Run arms x runs x episodes (resumable: run it again to continue), then report."""
     typer.echo(experiment(arms, runs, episodes, seed, shield, transport, out, workers, token,
-                          lead))
+                          lead, shield_config))
     typer.echo(f"\nrecords, summary.json, table.md and figure.png in {out}")
 
 

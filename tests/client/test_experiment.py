@@ -104,10 +104,13 @@ def cli(*args: str) -> subprocess.CompletedProcess[str]:
     (("run", "--arms", "ddpg,teleport"), "unknown arm 'teleport'"),
     (("run", "--shield", "http://127.0.0.1:{port}", "--episodes", "1"), "unreachable"),
     (("report", "{tmp}/nothing"), "no record files"),
+    (("run", "--shield-config", '{"reviser": {"inspect": "every"}}'),
+     "shield configuration: reviser.inspect"),
 ])
 def test_user_errors_are_one_clear_line(tmp_path: Path, args: tuple[str, ...],
                                         message: str) -> None:
-    args = tuple(a.format(port=free_port(), tmp=tmp_path) for a in args)
+    args = tuple(a.replace("{port}", str(free_port())).replace("{tmp}", str(tmp_path))
+                 for a in args)
     result = cli(*args, "--out", str(tmp_path / "out")) if args[0] == "run" else cli(*args)
     assert result.returncode == 2
     assert message in result.stderr and "Traceback" not in result.stderr
