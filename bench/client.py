@@ -4,7 +4,9 @@
 * one DDPG update (batch 64, the configured networks), single-threaded torch;
 * the wall time of the same shielded DDPG training (seed 0, the reviser active from the start
   so every step is inspected) in-process and over WebSocket, HTTP and the batch route of a
-  shield service in its own process, as ratios to in-process.
+  shield service in its own process, as ratios to in-process;
+* 10 DDPG runs (in-process shields) trained one after the other against the same 10 runs in
+  lockstep with one vectorised update.
 
 Medians over rounds.
 
@@ -18,6 +20,7 @@ import json
 import platform
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -84,6 +87,40 @@ def training(shield: StepShield, episodes: int) -> tuple[float, int]:
     return time.perf_counter() - start, steps
 
 
+def ensemble_update_ms(members: int, updates: int = 200) -> float:
+    """One vectorised update of ``members`` DDPG learners."""
+    from client.agents.ensemble import DDPGEnsemble
+
+    ensemble = DDPGEnsemble(DDPGConfig(warmup=64), list(range(members)))
+    rng = np.random.default_rng(0)
+    for member in ensemble.members:
+        for _ in range(500):
+            obs = rng.uniform(0, 30, 4).astype(np.float32)
+            member.remember(obs, 0.0, -1.0, obs, False)
+    ensemble.update()
+    start = time.perf_counter()
+    for _ in range(updates):
+        ensemble.update()
+    return (time.perf_counter() - start) / updates * 1e3
+
+
+def lockstep_against_separate(runs: int, episodes: int) -> tuple[float, float]:
+    """Seconds for ``runs`` x ``episodes`` of ddpg+shield: one run after another, lockstep."""
+    from client.experiment.runner import ExperimentConfig, run_lockstep, run_one
+
+    config = ExperimentConfig(arms=("ddpg+shield",), runs=runs, episodes=episodes, seed=0,
+                              ddpg={"warmup": 256},
+                              shield_config={"reviser": {"activate_after_episodes": 0}})
+    with tempfile.TemporaryDirectory() as separate, tempfile.TemporaryDirectory() as together:
+        start = time.perf_counter()
+        for run in range(runs):
+            run_one(config, "ddpg+shield", run, Path(separate))
+        one_by_one = time.perf_counter() - start
+        start = time.perf_counter()
+        run_lockstep(config, "ddpg+shield", Path(together))
+        return one_by_one, time.perf_counter() - start
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rounds", type=int, default=3)
@@ -94,9 +131,10 @@ def main() -> None:
 
     sim = statistics.median(simulator_steps_per_second() for _ in range(args.rounds))
     update = statistics.median(ddpg_update_ms() for _ in range(args.rounds))
+    ensemble = statistics.median(ensemble_update_ms(10) for _ in range(args.rounds))
     times: dict[str, list[float]] = {"in-process": [], "ws": [], "http": [], "batch": []}
     steps: dict[str, int] = {}
-    with service(Path("runs/bench-client")) as url:
+    with tempfile.TemporaryDirectory() as data, service(Path(data) / "shield") as url:
         for r in range(args.rounds):
             with ShieldClient(url) as admin:
                 for t in ("ws", "http", "batch"):
@@ -113,14 +151,18 @@ def main() -> None:
                 shield.close()
                 times[name].append(seconds)
                 steps[name] = n
+    separate, together = zip(*(lockstep_against_separate(10, 3) for _ in range(args.rounds)),
+                             strict=True)
     base = statistics.median(times["in-process"])
     results: dict[str, Any] = {"simulator_steps_per_s": sim, "ddpg_update_ms": update,
-                               "training": {}}
+                               "ensemble_update_ms_10": ensemble, "training": {}}
     print(f"\nseed 0; {args.rounds} rounds; {args.episodes} training episodes each; "
           f"{platform.machine()}, Python {platform.python_version()}, torch "
           f"{torch.__version__} (1 thread)\n")
     print(f"simulator alone: {sim:,.0f} steps per second")
-    print(f"DDPG update (batch 64, 64x64 networks): {update:.2f} ms\n")
+    print(f"DDPG update (batch 64, 64x64 networks): {update:.2f} ms")
+    print(f"one vectorised update of 10 learners: {ensemble:.2f} ms "
+          f"({10 * update / ensemble:.1f}x faster than 10 updates)\n")
     print("| shield reached | training wall time (s) | steps | vs in-process |")
     print("|---|---:|---:|---:|")
     for name, values in times.items():
@@ -128,6 +170,11 @@ def main() -> None:
         results["training"][name] = {"seconds": median, "steps": steps[name],
                                      "ratio": median / base}
         print(f"| {name} | {median:.1f} | {steps[name]} | {median / base:.2f}x |")
+    one_by_one, lockstep = statistics.median(separate), statistics.median(together)
+    results["lockstep"] = {"runs": 10, "episodes": 3, "separate_s": one_by_one,
+                           "lockstep_s": lockstep}
+    print(f"\n10 runs x 3 episodes of ddpg+shield (in-process shields): one after another "
+          f"{one_by_one:.1f} s, lockstep {lockstep:.1f} s (ratio {one_by_one / lockstep:.2f})")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
 

@@ -34,7 +34,7 @@ def fail(message: str) -> NoReturn:
 
 def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, transport: str,
                out: Path, workers: int, token: str | None, lead: str,
-               shield_config: str = "{}") -> str:
+               shield_config: str = "{}", lockstep: bool = False) -> str:
     """Run, then report; every failure a user can cause becomes one line."""
     try:
         overrides = json.loads(shield_config)
@@ -48,7 +48,7 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
                 probe.health()
         total = len(config.arms) * runs * episodes
         with tqdm(total=total, desc="episodes", unit="ep", disable=None) as bar:
-            runner.run_all(config, out, workers, token, bar)
+            runner.run_all(config, out, workers, token, bar, lockstep)
         text, _ = report.write(out)
     except ShieldError as error:
         fail(f"shield configuration: {error.field}: {error.message}")
@@ -77,10 +77,13 @@ def run(
     shield_config: Annotated[str, typer.Option(
         help='Overrides of the shield configuration as JSON, e.g. '
              '\'{"reviser": {"inspect": "first_index"}}\' (ablations).')] = "{}",
+    lockstep: Annotated[bool, typer.Option(
+        help="Train the runs of each DDPG arm together in one process, one vectorised update "
+             "for all (equal to separate runs within rounding).")] = False,
 ) -> None:
     """Run arms x runs x episodes (resumable: run it again to continue), then report."""
     typer.echo(experiment(arms, runs, episodes, seed, shield, transport, out, workers, token,
-                          lead, shield_config))
+                          lead, shield_config, lockstep))
     typer.echo(f"\nrecords, summary.json, table.md and figure.png in {out}")
 
 

@@ -13,6 +13,7 @@ import multiprocessing
 import platform
 import time
 from collections import Counter
+from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -120,115 +121,224 @@ def make_shield(config: ExperimentConfig, arm: str, run: int, seed: int,
     return ShieldSession(config.shield, token=token, model=name)
 
 
+class EpisodeMeter:
+    """What one episode did, step by step."""
+
+    def __init__(self) -> None:
+        self.interventions: Counter[str] = Counter()
+        self.would = 0
+        self.diffs: list[float] = []
+        self.episode_return = 0.0
+
+    def add(self, proposed: float, reward: float, info: dict[str, Any]) -> float:
+        """Count one step; returns the action that was executed."""
+        decision = info.get("shield")
+        if decision is not None and decision.revised:
+            if decision.shadow:
+                self.would += 1
+            else:
+                self.interventions[decision.verdict] += 1
+        self.diffs.append(info["speed_difference"])
+        self.episode_return += reward
+        return proposed if decision is None else float(decision.action)
+
+    def result(self, info: dict[str, Any]) -> dict[str, Any]:
+        """The measurements of the finished episode, given the last step's info."""
+        done = info.get("shield_done")
+        return {
+            "steps": len(self.diffs),
+            "outcome": info.get("event") or "success",
+            "interventions": dict(self.interventions),
+            "revisions_would": self.would,
+            "speed_diff_n": len(self.diffs),
+            "speed_diff_mean": float(np.mean(self.diffs)),
+            "speed_diff_var": float(np.var(self.diffs)),
+            "episode_return": self.episode_return,
+            "n_states": 0 if done is None else done.n_states,
+        }
+
+
 def play(env: Any, agent: Controller, obs: Any, learner: Any | None) -> tuple[
         dict[str, Any], Any]:
     """One episode; returns its measurements and the last observation."""
-    interventions: Counter[str] = Counter()
-    would = 0
-    diffs: list[float] = []
-    episode_return = 0.0
+    meter = EpisodeMeter()
     info: dict[str, Any] = {}
-    steps = 0
-    for steps in range(1, 801):  # noqa: B007 - steps is the episode length after the loop
+    for _ in range(800):
         proposed = agent.act(obs)
         next_obs, reward, terminated, truncated, info = env.step(
             np.array([proposed], np.float32))
-        decision = info.get("shield")
-        executed = proposed if decision is None else decision.action
-        if decision is not None and decision.revised:
-            if decision.shadow:
-                would += 1
-            else:
-                interventions[decision.verdict] += 1
+        executed = meter.add(proposed, reward, info)
         if learner is not None:
             learner.remember(obs, executed, reward, next_obs, terminated)
             learner.update()
-        diffs.append(info["speed_difference"])
-        episode_return += reward
         obs = next_obs
         if terminated or truncated:
             break
-    done = info.get("shield_done")
-    return {
-        "steps": steps,
-        "outcome": info.get("event") or "success",
-        "interventions": dict(interventions),
-        "revisions_would": would,
-        "speed_diff_n": len(diffs),
-        "speed_diff_mean": float(np.mean(diffs)),
-        "speed_diff_var": float(np.var(diffs)),
-        "episode_return": episode_return,
-        "n_states": 0 if done is None else done.n_states,
-    }, obs
+    return meter.result(info), obs
+
+
+@dataclass
+class Run:
+    """One run of an arm: its seed, its record file, its environment (shielded or not)."""
+
+    config: ExperimentConfig
+    arm: str
+    index: int
+    seed: int
+    path: Path
+    recorded: list[EpisodeRecord]
+    env: Any
+    shield: StepShield | None
+    appended: int = 0
+
+    @classmethod
+    def open(cls, config: ExperimentConfig, arm: str, index: int, out: Path,
+             token: str | None) -> Run:
+        seed = run_seeds(config.seed, config.runs)[index]
+        path = records.path_for(out, arm, index)
+        identity = {k: v for k, v in config.to_dict().items()
+                    if k not in ("shield", "transport")}
+        header = {"config": config.to_dict(), "identity": identity, "arm": arm, "run": index,
+                  "seed": seed, "versions": versions()}
+        recorded = records.start(path, header)
+        _, mode = parse_arm(arm)
+        env: Any = CarFollowingEnv(lead=profiles(config.lead),
+                                   reward=RewardConfig(**config.reward))
+        shield = None
+        if mode and len(recorded) < config.episodes:
+            shield = make_shield(config, arm, index, seed, token)
+            env = ShieldWrapper(env, shield, shadow=mode == "shadow")
+        return cls(config, arm, index, seed, path, recorded, env, shield)
+
+    @property
+    def complete(self) -> bool:
+        return len(self.recorded) >= self.config.episodes
+
+    def finish(self, episode: int, measured: dict[str, Any], wall_s: float,
+               progress: Any | None) -> None:
+        """Check a replayed episode against its record, or append a new one."""
+        record = EpisodeRecord(arm=self.arm, run=self.index, episode=episode, seed=self.seed,
+                               wall_s=wall_s, **measured)
+        if episode <= len(self.recorded):
+            old = self.recorded[episode - 1]
+            if (old.steps, old.outcome, old.interventions) != (
+                    record.steps, record.outcome, record.interventions):
+                raise RecordError(f"{self.path}: episode {episode} did not replay identically")
+            return
+        records.append(self.path, record)
+        self.appended += 1
+        if progress is not None:
+            progress.put(1)
+
+    def close(self) -> None:
+        if self.shield is not None:
+            self.shield.close()
+
+
+def _torch_for_one_core() -> None:
+    import torch
+
+    torch.set_num_threads(1)
+    torch.use_deterministic_algorithms(True)
 
 
 def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str | None = None,
             progress: Any | None = None) -> int:
     """Play one run to ``config.episodes``; returns the number of episodes appended."""
-    import torch
-
-    torch.set_num_threads(1)
-    torch.use_deterministic_algorithms(True)
-    seed = run_seeds(config.seed, config.runs)[run]
-    path = records.path_for(out, arm, run)
-    identity = {k: v for k, v in config.to_dict().items() if k not in ("shield", "transport")}
-    header = {"config": config.to_dict(), "identity": identity, "arm": arm, "run": run,
-              "seed": seed, "versions": versions()}
-    done = records.start(path, header)
-    if len(done) >= config.episodes:
+    _torch_for_one_core()
+    state = Run.open(config, arm, run, out, token)
+    if state.complete:
         return 0
-    controller, mode = parse_arm(arm)
-    env: Any = CarFollowingEnv(lead=profiles(config.lead), reward=RewardConfig(**config.reward))
-    shield = make_shield(config, arm, run, seed, token) if mode else None
-    if shield is not None:
-        env = ShieldWrapper(env, shield, shadow=mode == "shadow")
+    controller, _ = parse_arm(arm)
     learner = None
     agent: Controller
     if controller == "ddpg":
         from client.agents.ddpg import DDPG, DDPGConfig
 
-        learner = DDPG(DDPGConfig(**config.ddpg), seed)
+        learner = DDPG(DDPGConfig(**config.ddpg), state.seed)
         agent = learner
     elif controller == "random":
-        agent = RandomController(seed)
+        agent = RandomController(state.seed)
     else:
         agent = PRESETS["aggressive" if controller == "idm-aggressive" else "normal"]
-    appended = 0
-    obs, _ = env.reset(seed=seed)
+    obs, _ = state.env.reset(seed=state.seed)
     try:
         for episode in range(1, config.episodes + 1):
             start = time.perf_counter()
             if learner is not None:
                 learner.noise.reset()
-            measured, obs = play(env, agent, obs, learner)
-            record = EpisodeRecord(arm=arm, run=run, episode=episode, seed=seed,
-                                   wall_s=time.perf_counter() - start, **measured)
-            if episode <= len(done):
-                old = done[episode - 1]
-                if (old.steps, old.outcome, old.interventions) != (
-                        record.steps, record.outcome, record.interventions):
-                    raise RecordError(f"{path}: episode {episode} did not replay identically")
-            else:
-                records.append(path, record)
-                appended += 1
-                if progress is not None:
-                    progress.put(1)
-            obs, _ = env.reset()
+            measured, obs = play(state.env, agent, obs, learner)
+            state.finish(episode, measured, time.perf_counter() - start, progress)
+            obs, _ = state.env.reset()
     finally:
-        if shield is not None:
-            shield.close()
-    return appended
+        state.close()
+    return state.appended
+
+
+def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | None = None,
+                 progress: Any | None = None) -> int:
+    """Every run of a DDPG arm in one process, stepping together: one vectorised DDPG update
+    for all runs per step (:class:`~client.agents.ensemble.DDPGEnsemble`). Each run sees the
+    same sequence as :func:`run_one` (act, step, remember, update); results agree within the
+    rounding of batched arithmetic."""
+    from client.agents.ddpg import DDPGConfig
+    from client.agents.ensemble import DDPGEnsemble
+
+    if parse_arm(arm)[0] != "ddpg":
+        raise ValueError(f"lockstep training is for DDPG arms, not {arm!r}")
+    _torch_for_one_core()
+    runs = [r for r in (Run.open(config, arm, i, out, token) for i in range(config.runs))
+            if not r.complete]
+    if not runs:
+        return 0
+    learner = DDPGEnsemble(DDPGConfig(**config.ddpg), [r.seed for r in runs])
+    obs = [r.env.reset(seed=r.seed)[0] for r in runs]
+    episode = [1] * len(runs)
+    meters = [EpisodeMeter() for _ in runs]
+    started = [time.perf_counter()] * len(runs)
+    active = list(range(len(runs)))
+    for member in learner.members:
+        member.noise.reset()
+    try:
+        while active:
+            actions = learner.act(np.stack(obs))
+            for k in list(active):
+                next_obs, reward, terminated, truncated, info = runs[k].env.step(
+                    np.array([actions[k]], np.float32))
+                executed = meters[k].add(actions[k], reward, info)
+                learner.members[k].remember(obs[k], executed, reward, next_obs, terminated)
+                obs[k] = next_obs
+                if terminated or truncated:
+                    runs[k].finish(episode[k], meters[k].result(info),
+                                   time.perf_counter() - started[k], progress)
+                    episode[k] += 1
+                    if episode[k] > config.episodes:
+                        active.remove(k)
+                        continue
+                    obs[k], _ = runs[k].env.reset()
+                    meters[k], started[k] = EpisodeMeter(), time.perf_counter()
+                    learner.members[k].noise.reset()
+            learner.update()
+    finally:
+        for r in runs:
+            r.close()
+    return sum(r.appended for r in runs)
 
 
 def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None = None,
-            bar: Any | None = None) -> int:
-    """Every (arm, run) in its own process, at most ``workers`` at a time."""
-    jobs = [(arm, run) for arm in config.arms for run in range(config.runs)]
+            bar: Any | None = None, lockstep: bool = False) -> int:
+    """Every (arm, run) in its own process, at most ``workers`` at a time; with ``lockstep``
+    the runs of each DDPG arm share one process and one vectorised update."""
+    jobs: list[tuple[Callable[..., int], tuple[Any, ...]]] = []
+    for arm in config.arms:
+        if lockstep and parse_arm(arm)[0] == "ddpg":
+            jobs.append((run_lockstep, (config, arm, out, token)))
+        else:
+            jobs.extend((run_one, (config, arm, run, out, token)) for run in range(config.runs))
     context = multiprocessing.get_context("spawn")
     with context.Manager() as manager, ProcessPoolExecutor(workers, mp_context=context) as pool:
         progress = manager.Queue()
-        pending: set[Future[int]] = {
-            pool.submit(run_one, config, arm, run, out, token, progress) for arm, run in jobs}
+        pending: set[Future[int]] = {pool.submit(job, *args, progress) for job, args in jobs}
         appended = 0
         while pending:
             finished, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)

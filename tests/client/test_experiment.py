@@ -130,3 +130,10 @@ def test_run_command_end_to_end(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     assert "| idm+shadow | 2 | 6 |" in result.stdout
     assert len(list((tmp_path / "records").glob("*.jsonl"))) == 4
+
+
+def test_lockstep_command(tmp_path: Path) -> None:
+    result = cli("run", "--arms", "ddpg,idm", "--runs", "2", "--episodes", "2", "--lockstep",
+                 "--lead", "synthetic", "--workers", "2", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert "| ddpg | 2 | 4 |" in result.stdout and "| idm | 2 | 4 |" in result.stdout
