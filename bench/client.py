@@ -60,17 +60,31 @@ def simulator_steps_per_second(steps: int = 20_000) -> float:
     return steps / (time.perf_counter() - start)
 
 
-def ddpg_update_ms(updates: int = 500) -> float:
-    agent = DDPG(DDPGConfig(warmup=64), 0)
+def update_ms(learner: DDPG | Any, memories: list[DDPG], updates: int) -> float:
+    """Milliseconds per ``learner.update()`` once every memory holds 1000 transitions."""
     rng = np.random.default_rng(0)
-    for _ in range(1000):
-        obs = rng.uniform(0, 30, 4).astype(np.float32)
-        agent.remember(obs, 0.0, -1.0, obs, False)
-    agent.update()
+    for memory in memories:
+        for _ in range(1000):
+            obs = rng.uniform(0, 30, 4).astype(np.float32)
+            memory.remember(obs, 0.0, -1.0, obs, False)
+    learner.update()
     start = time.perf_counter()
     for _ in range(updates):
-        agent.update()
+        learner.update()
     return (time.perf_counter() - start) / updates * 1e3
+
+
+def ddpg_update_ms() -> float:
+    agent = DDPG(DDPGConfig(warmup=64), 0)
+    return update_ms(agent, [agent], 500)
+
+
+def ensemble_update_ms(members: int) -> float:
+    """One vectorised update of ``members`` DDPG learners."""
+    from client.agents.ensemble import DDPGEnsemble
+
+    ensemble = DDPGEnsemble(DDPGConfig(warmup=64), list(range(members)))
+    return update_ms(ensemble, ensemble.members, 200)
 
 
 def training(shield: StepShield, episodes: int) -> tuple[float, int]:
@@ -85,23 +99,6 @@ def training(shield: StepShield, episodes: int) -> tuple[float, int]:
         steps += measured["steps"]
         obs, _ = env.reset()
     return time.perf_counter() - start, steps
-
-
-def ensemble_update_ms(members: int, updates: int = 200) -> float:
-    """One vectorised update of ``members`` DDPG learners."""
-    from client.agents.ensemble import DDPGEnsemble
-
-    ensemble = DDPGEnsemble(DDPGConfig(warmup=64), list(range(members)))
-    rng = np.random.default_rng(0)
-    for member in ensemble.members:
-        for _ in range(500):
-            obs = rng.uniform(0, 30, 4).astype(np.float32)
-            member.remember(obs, 0.0, -1.0, obs, False)
-    ensemble.update()
-    start = time.perf_counter()
-    for _ in range(updates):
-        ensemble.update()
-    return (time.perf_counter() - start) / updates * 1e3
 
 
 def lockstep_against_separate(runs: int, episodes: int) -> tuple[float, float]:
