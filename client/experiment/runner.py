@@ -27,6 +27,7 @@ from client.agents.idm import PRESETS, RandomController
 from client.experiment import records
 from client.experiment.records import EpisodeRecord, RecordError
 from client.shield import BatchShield, LocalShield, ShieldClient, ShieldSession, StepShield
+from client.shield.remote import step_body
 from client.shield.wrapper import ShieldWrapper
 from client.sim import lead
 from client.sim.car_following import CarFollowingEnv, RewardConfig
@@ -193,7 +194,9 @@ class Run:
 
     @classmethod
     def open(cls, config: ExperimentConfig, arm: str, index: int, out: Path,
-             token: str | None) -> Run:
+             token: str | None, wrap: bool = True) -> Run:
+        """Open the run's records and environment; ``wrap=False`` leaves the shield (if any)
+        to the caller instead of putting it in front of the environment."""
         seed = run_seeds(config.seed, config.runs)[index]
         path = records.path_for(out, arm, index)
         identity = {k: v for k, v in config.to_dict().items()
@@ -207,7 +210,8 @@ class Run:
         shield = None
         if mode and len(recorded) < config.episodes:
             shield = make_shield(config, arm, index, seed, token)
-            env = ShieldWrapper(env, shield, shadow=mode == "shadow")
+            if wrap:
+                env = ShieldWrapper(env, shield, shadow=mode == "shadow")
         return cls(config, arm, index, seed, path, recorded, env, shield)
 
     @property
@@ -278,21 +282,28 @@ def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str 
 def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | None = None,
                  progress: Any | None = None) -> int:
     """Every run of a DDPG arm in one process, stepping together: one vectorised DDPG update
-    for all runs per step (:class:`~client.agents.ensemble.DDPGEnsemble`). Each run sees the
-    same sequence as :func:`run_one` (act, step, remember, update); results agree within the
-    rounding of batched arithmetic."""
+    for all runs per step (:class:`~client.agents.ensemble.DDPGEnsemble`), and with the batch
+    transport one request per step carrying a step of every run's model. Each run sees the
+    same sequence as :func:`run_one` (act, shield, step, remember, update); results agree
+    within the rounding of batched arithmetic."""
     from client.agents.ddpg import DDPGConfig
     from client.agents.ensemble import DDPGEnsemble
 
-    if parse_arm(arm)[0] != "ddpg":
+    controller, mode = parse_arm(arm)
+    if controller != "ddpg":
         raise ValueError(f"lockstep training is for DDPG arms, not {arm!r}")
     _torch_for_one_core()
-    runs = [r for r in (Run.open(config, arm, i, out, token) for i in range(config.runs))
-            if not r.complete]
+    runs = [r for r in (Run.open(config, arm, i, out, token, wrap=False)
+                        for i in range(config.runs)) if not r.complete]
     if not runs:
         return 0
+    shield = Lockstep(runs, config, arm, shadow=mode == "shadow") if mode else None
     learner = DDPGEnsemble(DDPGConfig(**config.ddpg), [r.seed for r in runs])
-    obs = [r.env.reset(seed=r.seed)[0] for r in runs]
+    obs, z = [], []
+    for r in runs:
+        first, info = r.env.reset(seed=r.seed)
+        obs.append(first)
+        z.append(info["efsm_observation"])
     episode = [1] * len(runs)
     meters = [EpisodeMeter() for _ in runs]
     started = [time.perf_counter()] * len(runs)
@@ -301,28 +312,99 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
         member.noise.reset()
     try:
         while active:
-            actions = learner.act(np.stack(obs))
-            for k in list(active):
+            proposals = learner.act(np.stack(obs))
+            decisions = shield.decide(active, z, proposals) if shield else [None] * len(active)
+            for k, decision in zip(list(active), decisions, strict=True):
+                action = proposals[k] if decision is None else float(decision.action)
                 next_obs, reward, terminated, truncated, info = runs[k].env.step(
-                    np.array([actions[k]], np.float32))
-                executed = meters[k].add(actions[k], reward, info)
+                    np.array([action], np.float32))
+                if decision is not None:
+                    info["shield"] = decision
+                executed = meters[k].add(proposals[k], reward, info)
                 learner.members[k].remember(obs[k], executed, reward, next_obs, terminated)
-                obs[k] = next_obs
+                obs[k], z[k] = next_obs, info["efsm_observation"]
                 if terminated or truncated:
-                    runs[k].finish(episode[k], meters[k].result(info),
-                                   time.perf_counter() - started[k], progress)
+                    finish = _finisher(runs[k], episode[k], meters[k], info, started[k],
+                                       progress)
+                    if shield:  # the record waits for the closing decision's state count
+                        shield.close_episode(k, z[k], info["event"], finish)
+                    else:
+                        finish(None)
                     episode[k] += 1
                     if episode[k] > config.episodes:
                         active.remove(k)
                         continue
-                    obs[k], _ = runs[k].env.reset()
+                    obs[k], reset_info = runs[k].env.reset()
+                    z[k] = reset_info["efsm_observation"]
                     meters[k], started[k] = EpisodeMeter(), time.perf_counter()
                     learner.members[k].noise.reset()
             learner.update()
+        if shield:
+            shield.flush()
     finally:
         for r in runs:
             r.close()
     return sum(r.appended for r in runs)
+
+
+def _finisher(run: Run, episode: int, meter: EpisodeMeter, info: dict[str, Any], start: float,
+              progress: Any | None) -> Callable[[Any], None]:
+    wall = time.perf_counter() - start
+
+    def finish(closing: Any) -> None:
+        if closing is not None:
+            info["shield_done"] = closing
+        run.finish(episode, meter.result(info), wall, progress)
+
+    return finish
+
+
+class Lockstep:
+    """The shields of lockstep runs: over the batch transport, one request per round with the
+    pending episode ends first, then a step of every active run (each model sees its steps in
+    order); otherwise each run's own shield, in the same order."""
+
+    def __init__(self, runs: list[Run], config: ExperimentConfig, arm: str,
+                 shadow: bool) -> None:
+        self.runs = runs
+        self.shadow = shadow
+        self.names = [model_name(config, arm, r.index) for r in runs]
+        first = runs[0].shield
+        self.batch = first if isinstance(first, BatchShield) else None
+        self.closing: list[tuple[int, dict[str, Any], Callable[[Any], None]]] = []
+
+    def close_episode(self, k: int, z: Any, event: str | None,
+                      finish: Callable[[Any], None]) -> None:
+        """Queue run k's episode end for the next round."""
+        body = step_body(z, None, done=True, event=event, shadow=self.shadow)
+        self.closing.append((k, body, finish))
+
+    def decide(self, active: list[int], z: list[Any], proposals: list[float]) -> list[Any]:
+        """Send the queued episode ends, then one step of every active run."""
+        requests = [(k, body) for k, body, _ in self.closing] + [
+            (k, step_body(z[k], proposals[k], shadow=self.shadow)) for k in active]
+        decisions = self._send(requests)
+        for (_, _, finish), closing in zip(self.closing, decisions, strict=False):
+            finish(closing)
+        answered = decisions[len(self.closing):]
+        self.closing = []
+        return answered
+
+    def flush(self) -> None:
+        """Send the episode ends still queued when the runs are over."""
+        if self.closing:
+            self.decide([], [], [])
+
+    def _send(self, requests: list[tuple[int, dict[str, Any]]]) -> list[Any]:
+        if self.batch is not None:
+            return self.batch.revise_many([(self.names[k], body) for k, body in requests])
+        out = []
+        for k, body in requests:
+            shield = self.runs[k].shield
+            assert shield is not None
+            options = {key: v for key, v in body.items() if key not in ("observation", "action")}
+            out.append(shield.revise(body["observation"], body["action"], **options))
+        return out
 
 
 def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None = None,

@@ -78,3 +78,23 @@ def test_lockstep_runs_record_what_separate_runs_record(tmp_path: Path) -> None:
 def test_lockstep_is_for_ddpg_arms(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="DDPG arms"):
         runner.run_lockstep(dataclasses.replace(CONFIG, arms=("idm",)), "idm", tmp_path)
+
+
+def test_lockstep_over_the_batch_route_equals_lockstep_in_process(tmp_path: Path) -> None:
+    """One request per lockstep step carries a step of every run's model; the learner's
+    arithmetic is the same as in-process, so the records are identical."""
+    from tests.conftest import start_server
+
+    server = start_server(tmp_path / "data", "--fsync", "never")
+    try:
+        remote = dataclasses.replace(CONFIG, shield=server.url, transport="batch")
+        local_dir, remote_dir = tmp_path / "local", tmp_path / "remote"
+        runner.run_lockstep(CONFIG, "ddpg+shield", local_dir)
+        runner.run_lockstep(remote, "ddpg+shield", remote_dir)
+        for run in range(CONFIG.runs):
+            a = [dataclasses.replace(r, wall_s=0.0) for r in episodes(local_dir, run)]
+            b = [dataclasses.replace(r, wall_s=0.0) for r in episodes(remote_dir, run)]
+            assert a == b
+        assert any(r.interventions for r in episodes(local_dir, 0))  # the shield acted
+    finally:
+        server.stop()
