@@ -16,6 +16,7 @@ Medians over rounds.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import platform
 import statistics
@@ -101,12 +102,15 @@ def training(shield: StepShield, episodes: int) -> tuple[float, int]:
     return time.perf_counter() - start, steps
 
 
-def lockstep_against_separate(runs: int, episodes: int) -> tuple[float, float]:
-    """Seconds for ``runs`` x ``episodes`` of ddpg+shield: one run after another, lockstep."""
+def lockstep_against_separate(runs: int, episodes: int, url: str = "local",
+                              ) -> tuple[float, float]:
+    """Seconds for ``runs`` x ``episodes`` of ddpg+shield, one run after another and in
+    lockstep; with a service ``url``, separate runs use WebSocket and lockstep the batch
+    route (one request per step for every run)."""
     from client.experiment.runner import ExperimentConfig, run_lockstep, run_one
 
     config = ExperimentConfig(arms=("ddpg+shield",), runs=runs, episodes=episodes, seed=0,
-                              ddpg={"warmup": 256},
+                              ddpg={"warmup": 256}, shield=url, transport="ws",
                               shield_config={"reviser": {"activate_after_episodes": 0}})
     with tempfile.TemporaryDirectory() as separate, tempfile.TemporaryDirectory() as together:
         start = time.perf_counter()
@@ -114,7 +118,8 @@ def lockstep_against_separate(runs: int, episodes: int) -> tuple[float, float]:
             run_one(config, "ddpg+shield", run, Path(separate))
         one_by_one = time.perf_counter() - start
         start = time.perf_counter()
-        run_lockstep(config, "ddpg+shield", Path(together))
+        run_lockstep(dataclasses.replace(config, transport="batch"), "ddpg+shield",
+                     Path(together))
         return one_by_one, time.perf_counter() - start
 
 
@@ -148,6 +153,7 @@ def main() -> None:
                 shield.close()
                 times[name].append(seconds)
                 steps[name] = n
+        remote = [lockstep_against_separate(10, 3, url) for _ in range(args.rounds)]
     separate, together = zip(*(lockstep_against_separate(10, 3) for _ in range(args.rounds)),
                              strict=True)
     base = statistics.median(times["in-process"])
@@ -172,6 +178,11 @@ def main() -> None:
                            "lockstep_s": lockstep}
     print(f"\n10 runs x 3 episodes of ddpg+shield (in-process shields): one after another "
           f"{one_by_one:.1f} s, lockstep {lockstep:.1f} s (ratio {one_by_one / lockstep:.2f})")
+    ws_runs, batch_lockstep = (statistics.median(x) for x in zip(*remote, strict=True))
+    results["lockstep_remote"] = {"separate_ws_s": ws_runs, "lockstep_batch_s": batch_lockstep}
+    print(f"the same against the service: one after another over WebSocket {ws_runs:.1f} s, "
+          f"lockstep over the batch route {batch_lockstep:.1f} s "
+          f"(ratio {ws_runs / batch_lockstep:.2f})")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
 
