@@ -44,6 +44,38 @@ class DDPGEnsemble:
         self._online = [*self.actor.values(), *self.critic.values()]
         self._target = [*self.actor_target.values(), *self.critic_target.values()]
 
+    def keep(self, members: Sequence[int]) -> None:
+        """Go on with these members only (positions in :attr:`members`): the stacked networks,
+        targets and Adam moments are sliced, so the members kept continue unchanged."""
+        index = torch.tensor(list(members), dtype=torch.long)
+
+        def rows(params: dict[str, torch.Tensor], grad: bool) -> dict[str, torch.Tensor]:
+            return {k: v.detach()[index].clone().requires_grad_(grad) for k, v in params.items()}
+
+        def moved(old: torch.optim.Adam, params: dict[str, torch.Tensor],
+                  new_params: dict[str, torch.Tensor]) -> torch.optim.Adam:
+            group = old.param_groups[0]
+            new = torch.optim.Adam(list(new_params.values()), lr=group["lr"], foreach=True)
+            for name, param in params.items():
+                state = old.state.get(param)
+                if state:
+                    new.state[new_params[name]] = {
+                        "step": state["step"].clone(),
+                        "exp_avg": state["exp_avg"][index].clone(),
+                        "exp_avg_sq": state["exp_avg_sq"][index].clone(),
+                    }
+            return new
+
+        actor, critic = rows(self.actor, True), rows(self.critic, True)
+        self.actor_opt = moved(self.actor_opt, self.actor, actor)
+        self.critic_opt = moved(self.critic_opt, self.critic, critic)
+        self.actor, self.critic = actor, critic
+        self.actor_target = rows(self.actor_target, False)
+        self.critic_target = rows(self.critic_target, False)
+        self.members = [self.members[i] for i in members]
+        self._online = [*self.actor.values(), *self.critic.values()]
+        self._target = [*self.actor_target.values(), *self.critic_target.values()]
+
     def _mu(self, params: dict[str, torch.Tensor], obs: torch.Tensor) -> torch.Tensor:
         return functional_call(self._actor_base, params, (obs,))  # type: ignore[no-any-return]
 

@@ -310,18 +310,22 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
     active = list(range(len(runs)))
     for member in learner.members:
         member.noise.reset()
+    proposals = [0.0] * len(runs)
     try:
-        while active:
-            proposals = learner.act(np.stack(obs))
+        while active:  # learner member j is run active[j]
+            for k, a in zip(active, learner.act(np.stack([obs[k] for k in active])),
+                            strict=True):
+                proposals[k] = a
             decisions = shield.decide(active, z, proposals) if shield else [None] * len(active)
-            for k, decision in zip(list(active), decisions, strict=True):
+            going = list(active)
+            for j, (k, decision) in enumerate(zip(list(active), decisions, strict=True)):
                 action = proposals[k] if decision is None else float(decision.action)
                 next_obs, reward, terminated, truncated, info = runs[k].env.step(
                     np.array([action], np.float32))
                 if decision is not None:
                     info["shield"] = decision
                 executed = meters[k].add(proposals[k], reward, info)
-                learner.members[k].remember(obs[k], executed, reward, next_obs, terminated)
+                learner.members[j].remember(obs[k], executed, reward, next_obs, terminated)
                 obs[k], z[k] = next_obs, info["efsm_observation"]
                 if terminated or truncated:
                     finish = _finisher(runs[k], episode[k], meters[k], info, started[k],
@@ -332,13 +336,17 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
                         finish(None)
                     episode[k] += 1
                     if episode[k] > config.episodes:
-                        active.remove(k)
+                        going.remove(k)
                         continue
                     obs[k], reset_info = runs[k].env.reset()
                     z[k] = reset_info["efsm_observation"]
                     meters[k], started[k] = EpisodeMeter(), time.perf_counter()
-                    learner.members[k].noise.reset()
+                    learner.members[j].noise.reset()
             learner.update()
+            if len(going) < len(active):  # finished runs learn no more: drop their learners
+                if going:
+                    learner.keep([active.index(k) for k in going])
+                active = going
         if shield:
             shield.flush()
     finally:

@@ -98,3 +98,27 @@ def test_lockstep_over_the_batch_route_equals_lockstep_in_process(tmp_path: Path
         assert any(r.interventions for r in episodes(local_dir, 0))  # the shield acted
     finally:
         server.stop()
+
+
+def test_dropping_members_leaves_the_others_learning_as_before() -> None:
+    torch.set_num_threads(1)
+    config = DDPGConfig(warmup=64)
+    full, cut = DDPGEnsemble(config, [1, 2, 3]), DDPGEnsemble(config, [1, 2, 3])
+    rng = np.random.default_rng(0)
+    obs = rng.uniform(0, 30, (3, 4)).astype(np.float32)
+    for t in range(200):
+        if t == 120:
+            cut.keep([0, 2])  # run 1 is over
+        kept = [0, 2] if t >= 120 else [0, 1, 2]
+        a_full, a_cut = full.act(obs), cut.act(obs[kept])
+        np.testing.assert_allclose(np.array(a_full)[kept], a_cut, atol=ACTION_TOLERANCE)
+        following = rng.uniform(0, 30, (3, 4)).astype(np.float32)
+        reward = rng.uniform(-3, 0, 3)
+        for k in range(3):
+            full.members[k].remember(obs[k], a_full[k], reward[k], following[k], False)
+        for j, k in enumerate(kept):
+            cut.members[j].remember(obs[k], a_cut[j], reward[k], following[k], False)
+        full.update()
+        cut.update()
+        obs = following
+    assert len(cut.members) == 2 and cut.actor_opt.state  # the Adam moments came along
