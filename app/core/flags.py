@@ -37,8 +37,10 @@ class StateFlags:
 
     @property
     def visits(self) -> npt.NDArray[np.int64]:
-        """How often each state was the recognised one."""
-        return self._visits[: self._n].copy()
+        """How often each state was the recognised one (read-only view)."""
+        view = self._visits[: self._n]
+        view.flags.writeable = False
+        return view
 
     def flagged(self) -> tuple[IntArray, IntArray]:
         """The flagged states (ascending) and their flags: the reviser reads only these."""
@@ -69,7 +71,7 @@ class StateFlags:
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state."""
-        return {"flags": self.flags.copy(), "visits": self.visits}
+        return {"flags": self.flags.copy(), "visits": self.visits.copy()}
 
     @classmethod
     def restore(

@@ -408,7 +408,7 @@ class Shield:
             "centre": self._low + self.clusterer.centres * self._range,
             "spread": np.sqrt(self.clusterer.variances()),
             "flag": [names[f] for f in self.flags.flags],
-            "visits": self.flags.visits,
+            "visits": self.flags.visits.copy(),
             "support": self.clusterer.support,
         }
 

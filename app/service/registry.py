@@ -9,7 +9,6 @@ nothing.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import re
 import threading
@@ -292,7 +291,7 @@ class ModelRegistry:
     def _publish(model: Model, step: Step, decision: Decision) -> None:
         event: dict[str, Any] = {
             "type": "step",
-            "decision": codec.to_json(dataclasses.asdict(decision)),
+            "decision": codec.decision_json(decision),
             "observation": list(step.observation),
             "event": step.event,
             "learn": step.learn,

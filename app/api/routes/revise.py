@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends, Path, Request, WebSocket
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
-from app.api.convert import decision_json, to_step
+from app.api.convert import to_step
 from app.api.deps import RegistryDep, SettingsDep, require_token
 from app.api.errors import TooLarge
 from app.api.schemas import (
@@ -20,6 +20,7 @@ from app.api.schemas import (
     ReviseRequest,
 )
 from app.core import Decision as CoreDecision
+from app.service.codec import decision_json
 from app.service.registry import DEFAULT_MODEL, ModelRegistry, Step
 
 ERRORS: dict[int | str, dict[str, object]] = {

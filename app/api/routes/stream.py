@@ -7,12 +7,13 @@ import json
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
 
-from app.api.convert import decision_json, to_step
+from app.api.convert import to_step
 from app.api.deps import token_ok
 from app.api.errors import error_body
 from app.api.routes.revise import NamePath, count, step_one
 from app.api.schemas import ReviseRequest
 from app.core import ShieldError
+from app.service.codec import decision_json
 from app.service.registry import DEFAULT_MODEL, ModelRegistry
 
 router = APIRouter(tags=["stream"])
