@@ -1,4 +1,4 @@
-"""``python -m client run | report | demo``: car-following experiments against the shield."""
+"""``python -m client run | report | compare | demo``: car-following experiments against the shield."""
 
 from __future__ import annotations
 
@@ -96,6 +96,21 @@ def report_command(directory: Path) -> None:
         fail(str(error))
     typer.echo(text)
     typer.echo(f"\nsummary.json, table.md and figure.png in {directory}")
+
+
+@cli.command("compare")
+def compare_command(
+    directories: list[Path],
+    out: Annotated[Path | None, typer.Option(help="Also write the table here.")] = None,
+) -> None:
+    """One table over the experiments in DIRECTORIES (ablations): a row per directory and arm."""
+    try:
+        text = report.compare(directories)
+    except RecordError as error:
+        fail(str(error))
+    if out is not None:
+        out.write_text(text + "\n")
+    typer.echo(text)
 
 
 @contextlib.contextmanager

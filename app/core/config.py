@@ -149,13 +149,18 @@ class ReviserConfig:
     inspect: Literal["any", "first_index"] = "any"  # A5
     search: Literal["fixed", "literal"] = "fixed"  # A6
     multi_step: Literal["iterate", "single"] = "iterate"  # A11
-    flags: Literal["sticky", "overwrite"] = "sticky"  # A4
+    # A4: "rate" (count-based, the spec's option c) replaces the [REC] "sticky" default: with
+    # sticky flags nearly every state ended up flagged and the reviser braked everywhere
+    # (results/README.md, tuned on seeds 0-1)
+    flags: Literal["sticky", "overwrite", "rate"] = "rate"
+    flag_min_rate: float = 0.002  # "rate" flags: failures per recognition that flag a state
     seed: int = 0
 
     def __post_init__(self) -> None:
         _check(self.activate_after_episodes >= 0, "activate_after_episodes", "must be >= 0")
         _check(self.noise_k >= 0 and math.isfinite(self.noise_k), "noise_k", "must be >= 0")
         _check(1 <= self.horizon <= 16, "horizon", "horizon lies in [1, 16]")
+        _check(0.0 < self.flag_min_rate <= 1.0, "flag_min_rate", "lies in (0, 1]")
         _check(0 <= self.seed < 2**63, "seed", "seed lies in [0, 2**63)")
 
 

@@ -1,4 +1,4 @@
-"""Unfavourable-state flags L(s(i)) and visit counts (spec §5).
+"""Unfavourable-state flags L(s(i)), visit and failure counts (spec §5).
 
 A flag is 0 (l_n, favourable) or ``1 + c`` for criterion ``c`` of the configuration, whose
 order is the priority (the paper: collision l_s before large distance l_ld).
@@ -14,33 +14,38 @@ import numpy.typing as npt
 from app.core._arrays import ensure_capacity
 
 IntArray = npt.NDArray[np.int64]
+FlagMode = Literal["sticky", "overwrite", "rate"]
 NO_FLAG = 0
 
 
 class StateFlags:
-    """The flag and the number of recognitions of every state."""
+    """The flag, the number of recognitions and the failures of every state."""
 
-    def __init__(self, mode: Literal["sticky", "overwrite"], max_states: int) -> None:
+    def __init__(self, mode: FlagMode, max_states: int, n_criteria: int,
+                 min_rate: float) -> None:
         self.mode = mode
         self.max_states = max_states
+        self.min_rate = min_rate
         self._n = 0
         self._flags = np.zeros(0, dtype=np.int64)
         self._visits = np.zeros(0, dtype=np.int64)
+        self._failures = np.zeros((0, n_criteria), dtype=np.int64)
         self._flagged: tuple[IntArray, IntArray] | None = None
 
     @property
     def flags(self) -> npt.NDArray[np.int64]:
         """Flag of every state (read-only view)."""
-        view = self._flags[: self._n]
-        view.flags.writeable = False
-        return view
+        return _read_only(self._flags[: self._n])
 
     @property
     def visits(self) -> npt.NDArray[np.int64]:
         """How often each state was the recognised one (read-only view)."""
-        view = self._visits[: self._n]
-        view.flags.writeable = False
-        return view
+        return _read_only(self._visits[: self._n])
+
+    @property
+    def failures(self) -> npt.NDArray[np.int64]:
+        """Failures of each criterion recognised in each state, n x criteria (read-only)."""
+        return _read_only(self._failures[: self._n])
 
     def flagged(self) -> tuple[IntArray, IntArray]:
         """The flagged states (ascending) and their flags: the reviser reads only these."""
@@ -51,35 +56,59 @@ class StateFlags:
 
     def add_state(self) -> None:
         """A new state starts favourable and unvisited."""
-        self._flags = ensure_capacity(self._flags, self._n + 1, self.max_states)
-        self._visits = ensure_capacity(self._visits, self._n + 1, self.max_states)
-        self._n += 1
+        n = self._n
+        self._flags = ensure_capacity(self._flags, n + 1, self.max_states)
+        self._visits = ensure_capacity(self._visits, n + 1, self.max_states)
+        self._failures = ensure_capacity(self._failures, n + 1, self.max_states)
+        self._n = n + 1
 
     def observe(self, state: int, criterion: int | None) -> None:
-        """Count a recognition of ``state`` and flag it (A4).
+        """Count a recognition of ``state`` (and its failure, if any) and flag it (A4).
 
         ``sticky`` [REC]: an unfavourable flag is only replaced by one of higher priority.
         ``overwrite``: the literal re-flagging of the recognised state on every step.
+        ``rate`` (A4 c, count-based): the state carries the highest-priority criterion whose
+        failures make up at least ``min_rate`` of its recognitions, so that a state which
+        covers much ordinary driving is not condemned by one failure at its edge.
         """
         self._visits[state] += 1
-        new = NO_FLAG if criterion is None else criterion + 1
-        old = self._flags[state]
-        if self.mode == "overwrite" or (new != NO_FLAG and (old == NO_FLAG or new < old)):
+        if criterion is not None:
+            self._failures[state, criterion] += 1
+        old = int(self._flags[state])
+        if self.mode == "rate":
+            new = self._rate_flag(state)
+        else:
+            new = NO_FLAG if criterion is None else criterion + 1
+            if self.mode == "sticky" and (new == NO_FLAG or NO_FLAG < old < new):
+                new = old
+        if new != old:
             self._flags[state] = new
-            if new != old:
-                self._flagged = None
+            self._flagged = None
+
+    def _rate_flag(self, state: int) -> int:
+        failures = self._failures[state]
+        frequent = np.flatnonzero(failures >= max(1.0, self.min_rate * self._visits[state]))
+        return int(frequent[0]) + 1 if frequent.size else NO_FLAG
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state."""
-        return {"flags": self.flags.copy(), "visits": self.visits.copy()}
+        return {"flags": self.flags.copy(), "visits": self.visits.copy(),
+                "failures": self.failures.copy()}
 
     @classmethod
-    def restore(
-        cls, mode: Literal["sticky", "overwrite"], max_states: int, data: dict[str, Any]
-    ) -> StateFlags:
+    def restore(cls, mode: FlagMode, max_states: int, n_criteria: int, min_rate: float,
+                data: dict[str, Any]) -> StateFlags:
         """Rebuild from :meth:`snapshot` output."""
-        self = cls(mode, max_states)
+        self = cls(mode, max_states, n_criteria, min_rate)
         self._flags = np.array(data["flags"], dtype=np.int64).ravel()
         self._visits = np.array(data["visits"], dtype=np.int64).ravel()
         self._n = self._flags.shape[0]
+        self._failures = np.array(data["failures"], dtype=np.int64).reshape(self._n, n_criteria)
+        if self._visits.shape[0] != self._n:
+            raise ValueError("flags and visits disagree on the state count")
         return self
+
+
+def _read_only(view: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+    view.flags.writeable = False
+    return view

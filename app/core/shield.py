@@ -34,7 +34,7 @@ from app.core.lazy_tpm import LazyTransitions
 from app.core.tpm import DenseTransitions, TransitionModel
 
 FloatArray = npt.NDArray[np.float64]
-SNAPSHOT_FORMAT = 1
+SNAPSHOT_FORMAT = 2
 
 
 @dataclass(frozen=True)
@@ -125,7 +125,8 @@ class Shield:
         cfg = self.config
         self.clusterer = EvolvingClusterer(cfg.clustering, self._dim, cfg.limits.max_states)
         self.transitions: TransitionModel = self._new_transitions()
-        self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states)
+        self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria),
+                                cfg.reviser.flag_min_rate)
         self.streams: dict[str, StreamState] = {}
         self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria})
         self._rng = np.random.default_rng(cfg.reviser.seed)
@@ -413,14 +414,17 @@ class Shield:
         }
 
     def state_view(self, index: int) -> dict[str, Any]:
-        """One state: centre in physical units, spread, flag, visits."""
+        """One state: centre in physical units, spread, flag, visits, failures by criterion."""
         names = [None] + [c.name for c in self.config.criteria]
+        failures = self.flags.failures[index]
         return {
             "index": index,
             "centre": [float(v) for v in self._low + self.clusterer.centres[index] * self._range],
             "spread": float(np.sqrt(self.clusterer.variances()[index])),
             "flag": names[int(self.flags.flags[index])],
             "visits": int(self.flags.visits[index]),
+            "failures": {c.name: int(f) for c, f in zip(self.config.criteria, failures,
+                                                         strict=True)},
         }
 
     def next_states(self, index: int, top: int = 5) -> list[list[tuple[int, float]]]:
@@ -493,7 +497,8 @@ class Shield:
         else:
             self.transitions = LazyTransitions.restore(cfg.action.n_bins, cfg.transitions,
                                                        limit, tpm)
-        self.flags = StateFlags.restore(cfg.reviser.flags, limit, data["flags"])
+        self.flags = StateFlags.restore(cfg.reviser.flags, limit, len(cfg.criteria),
+                                        cfg.reviser.flag_min_rate, data["flags"])
         n = self.clusterer.n_states
         if self.transitions.n_states != n or self.flags.flags.shape[0] != n:
             raise InvalidSnapshot("states, matrices and flags disagree on the state count")

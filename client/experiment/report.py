@@ -61,23 +61,42 @@ def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
     return summary
 
 
-def table(summary: dict[str, Any]) -> str:
-    """The paper's Table 1 per arm, as Markdown."""
+def table(summary: dict[str, Any], notes: dict[str, str] | None = None) -> str:
+    """The paper's Table 1 per arm, as Markdown; ``notes`` adds a column (for example the
+    shield configuration of each row)."""
+    extra = ("", "") if notes is None else (" shield configuration |", "---|")
     lines = [
         "| arm | runs | episodes | success | large distance | collision | no failure after "
-        "episode | speed difference mean | variance | interventions |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        f"episode | speed difference mean | variance | interventions |{extra[0]}",
+        f"|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|{extra[1]}",
     ]
     def number(x: float | None) -> str:
         return "-" if x is None else f"{x:.4f}"
 
     for arm, s in summary.items():
+        note = "" if notes is None else f" {notes[arm]} |"
         lines.append(
             f"| {arm} | {s['runs']} | {s['episodes']} | {s['successes']} "
             f"({100 * s['success_rate']:.1f}%) | {s['large_distance']} | {s['collision']} "
             f"| {s['never_fails_after']} | {number(s['speed_difference_mean'])} "
-            f"| {number(s['speed_difference_variance'])} | {sum(s['interventions'].values())} |")
+            f"| {number(s['speed_difference_variance'])} | {sum(s['interventions'].values())} "
+            f"|{note}")
     return "\n".join(lines)
+
+
+def compare(directories: list[Path]) -> str:
+    """One table over several experiments (ablations): a row per directory and arm, with the
+    shield configuration each was run with."""
+    summary: dict[str, Any] = {}
+    notes: dict[str, str] = {}
+    for directory in directories:
+        headers, episodes = read_all(directory)
+        overrides = json.dumps(headers[0]["config"]["shield_config"], separators=(",", ":"))
+        for arm, row in summarise(episodes).items():
+            label = f"{directory.name}: {arm}"
+            summary[label] = row
+            notes[label] = f"`{overrides}`" if "+" in arm else "-"
+    return table(summary, notes)
 
 
 def figure(episodes: list[EpisodeRecord], path: Path) -> None:

@@ -137,3 +137,22 @@ def test_lockstep_command(tmp_path: Path) -> None:
                  "--lead", "synthetic", "--workers", "2", "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
     assert "| ddpg | 2 | 4 |" in result.stdout and "| idm | 2 | 4 |" in result.stdout
+
+
+def test_compare_puts_experiments_side_by_side(tmp_path: Path) -> None:
+    """One row per directory and arm, each shielded row naming its configuration."""
+    for name, overrides in (("default", "{}"), ("overwrite", '{"reviser":{"flags":"overwrite"}}')):
+        result = cli("run", "--arms", "idm-aggressive,idm-aggressive+shield", "--runs", "1",
+                     "--episodes", "2", "--lead", "synthetic", "--shield-config", overrides,
+                     "--out", str(tmp_path / name))
+        assert result.returncode == 0, result.stderr
+    result = cli("compare", str(tmp_path / "default"), str(tmp_path / "overwrite"),
+                 "--out", str(tmp_path / "table.md"))
+    assert result.returncode == 0, result.stderr
+    rows = [line for line in result.stdout.splitlines() if line.startswith("| ")][1:]
+    assert [row.split(" | ")[0] for row in rows] == [
+        "| default: idm-aggressive", "| default: idm-aggressive+shield",
+        "| overwrite: idm-aggressive", "| overwrite: idm-aggressive+shield"]
+    assert rows[3].endswith('`{"reviser":{"flags":"overwrite"}}` |')
+    assert rows[0].endswith(" - |")
+    assert (tmp_path / "table.md").read_text() == result.stdout

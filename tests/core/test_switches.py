@@ -85,6 +85,23 @@ def test_a4_sticky_flags_survive_a_later_uneventful_visit() -> None:
     assert flags == {"sticky": 1, "overwrite": 0}
 
 
+def test_a4_rate_flags_follow_the_share_of_failures_among_recognitions() -> None:
+    """Count-based flags (A4 c): a state is flagged while its failures are frequent enough."""
+    shield = shield_with(reviser=ReviserConfig(flags="rate", flag_min_rate=0.1))
+    shield.step([0.9], None, event="large_distance", done=True)  # 1 failure, 1 recognition
+    assert shield.flags.flags[0] == 2
+    for _ in range(9):
+        shield.step([0.9], 0.0)
+    assert shield.flags.flags[0] == 2  # 1 failure in 10 recognitions: exactly 10%
+    shield.step([0.9], 0.0)
+    assert shield.flags.flags[0] == 0  # 1 in 11: the busy state is favourable again
+    shield.step([0.9], None, event="collision", done=True)
+    assert shield.flags.flags[0] == 0  # each criterion on its own: 1 in 12
+    shield.step([0.9], None, event="collision", done=True)
+    assert shield.flags.flags[0] == 1  # 2 collisions in 13
+    assert shield.state_view(0)["failures"] == {"collision": 2, "large_distance": 1}
+
+
 def diffuse_prediction_shield(rule: str) -> Shield:
     """State 0 favourable, state 1 flagged; untried actions predict 50/50."""
     shield = shield_with(reviser=ReviserConfig(inspect=rule, activate_after_episodes=0))  # type: ignore[arg-type]
