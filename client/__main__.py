@@ -1,4 +1,4 @@
-"""``python -m client run | report | compare | demo``: car-following experiments against the shield."""
+"""``python -m client run | report | compare | demo``: car-following experiments."""
 
 from __future__ import annotations
 

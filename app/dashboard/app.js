@@ -155,7 +155,10 @@ async function pickState(event) {
   if (best === null) return;
   view.picked = best; view.dirty = true;
   const detail = await (await api(`/models/${view.model}/states/${best}?top=3`)).json();
-  $("picked").textContent = `#${best} (${detail.flag || "favourable"}, ${detail.visits} visits)`;
+  const failures = Object.entries(detail.failures).filter(([, n]) => n > 0)
+    .map(([name, n]) => `${n} ${name.replace("_", " ")}`).join(", ") || "no failures";
+  $("picked").textContent =
+    `#${best} (${detail.flag || "favourable"}, ${detail.visits} visits, ${failures})`;
   const rows = detail.next.map((a) => `<tr><td>${a.bin}</td><td>${a.states.map(
     (s) => `#${s.state} ${(100 * s.prob).toFixed(1)}%`).join(", ")}</td></tr>`).join("");
   $("state-detail").innerHTML = `<p>centre ${detail.centre.map((v) => v.toFixed(1)).join(", ")}</p>`

@@ -254,3 +254,18 @@ def test_the_default_model_takes_its_configuration_from_a_file(tmp_path: Any) ->
     with TestClient(create_app(Settings(config=path))) as c:
         config = c.get("/model", params={"tpm": "none", "exact": False}).json()["config"]
     assert config["clustering"]["epsilon"] == 0.1 and config["reviser"]["seed"] == 9
+
+
+def test_a_state_reports_its_flag_failures_and_next_states(client: TestClient) -> None:
+    episode(client)
+    crashed = exact(client)["flags"]
+    index = int(np.flatnonzero(codec.from_json(crashed)["failures"][:, 0])[0])
+    r = client.get(f"/models/default/states/{index}", params={"top": 2})
+    assert r.status_code == 200
+    state = r.json()
+    assert state["failures"] == {"collision": 1, "large_distance": 0}
+    assert state["flag"] == "collision"  # 1 failure in a handful of recognitions
+    assert state["visits"] >= 1 and len(state["next"]) == 20
+    assert all(len(a["states"]) <= 2 for a in state["next"])
+    missing = client.get("/models/default/states/999")
+    assert missing.status_code == 422 and missing.json()["error"]["field"] == "index"

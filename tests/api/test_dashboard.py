@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import time
 from collections.abc import Iterator
@@ -78,7 +79,8 @@ def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) ->
                                                 "y": y * box["height"] / height})
         page.wait_for_selector("#next-states")
         assert page.locator("#next-states tbody tr").count() == 20
-        assert f"#{index}" in page.locator("#picked").inner_text()
+        picked = page.locator("#picked").inner_text()
+        assert f"#{index}" in picked and re.search(r"\d+ visits, (no failures|\d+ \w+)", picked)
 
         # the snapshot downloads carry the exact state (JSON) and a NumPy archive
         with page.expect_download() as download:
