@@ -6,11 +6,12 @@ run's seed; every other line is one :class:`EpisodeRecord`.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 
 @dataclass(frozen=True)
@@ -41,13 +42,27 @@ def path_for(directory: Path, arm: str, run: int) -> Path:
     return directory / "records" / f"{arm.replace('+', '_')}__run{run:02d}.jsonl"
 
 
+def claim(path: Path) -> IO[bytes]:
+    """Hold the run's file exclusively until the returned handle is closed, so that two
+    processes never append to one run (a second gets :class:`RecordError`)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle = open(path, "ab")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.close()
+        raise RecordError(f"{path}: another process is writing this run; "
+                          f"stop it or wait for it") from None
+    return handle
+
+
 def start(path: Path, header: dict[str, Any]) -> list[EpisodeRecord]:
     """Open a run's file: create it with the header, or read the episodes it already holds.
 
     An existing file must carry the same ``identity`` (the configuration less where the
     shield runs and how it is reached, which change no result) else :class:`RecordError`.
     """
-    if not path.exists():
+    if not path.exists() or path.stat().st_size == 0:
         path.parent.mkdir(parents=True, exist_ok=True)
         with open(path, "w") as f:
             f.write(json.dumps({"header": header}) + "\n")

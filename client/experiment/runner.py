@@ -8,16 +8,20 @@ missing ones are appended.
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 import multiprocessing
+import os
 import platform
+import signal
+import sys
 import time
 from collections import Counter
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Protocol
+from typing import IO, Any, Literal, Protocol
 
 import numpy as np
 
@@ -32,6 +36,7 @@ from client.shield.wrapper import ShieldWrapper
 from client.sim import lead
 from client.sim.car_following import CarFollowingEnv, RewardConfig
 
+PR_SET_PDEATHSIG = 1  # prctl(2)
 CONTROLLERS = ("ddpg", "idm", "idm-aggressive", "random")
 MODES = ("shield", "shadow")
 
@@ -190,6 +195,7 @@ class Run:
     recorded: list[EpisodeRecord]
     env: Any
     shield: StepShield | None
+    claim: IO[bytes]
     appended: int = 0
 
     @classmethod
@@ -203,7 +209,12 @@ class Run:
                     if k not in ("shield", "transport")}
         header = {"config": config.to_dict(), "identity": identity, "arm": arm, "run": index,
                   "seed": seed, "versions": versions()}
-        recorded = records.start(path, header)
+        claim = records.claim(path)
+        try:
+            recorded = records.start(path, header)
+        except RecordError:
+            claim.close()
+            raise
         _, mode = parse_arm(arm)
         env: Any = CarFollowingEnv(lead=profiles(config.lead),
                                    reward=RewardConfig(**config.reward))
@@ -212,7 +223,7 @@ class Run:
             shield = make_shield(config, arm, index, seed, token)
             if wrap:
                 env = ShieldWrapper(env, shield, shadow=mode == "shadow")
-        return cls(config, arm, index, seed, path, recorded, env, shield)
+        return cls(config, arm, index, seed, path, recorded, env, shield, claim)
 
     @property
     def complete(self) -> bool:
@@ -235,8 +246,10 @@ class Run:
             progress.put(1)
 
     def close(self) -> None:
+        """Release the shield and the run's file."""
         if self.shield is not None:
             self.shield.close()
+        self.claim.close()
 
 
 def _torch_for_one_core() -> None:
@@ -252,6 +265,7 @@ def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str 
     _torch_for_one_core()
     state = Run.open(config, arm, run, out, token)
     if state.complete:
+        state.close()
         return 0
     controller, _ = parse_arm(arm)
     learner = None
@@ -293,8 +307,13 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
     if controller != "ddpg":
         raise ValueError(f"lockstep training is for DDPG arms, not {arm!r}")
     _torch_for_one_core()
-    runs = [r for r in (Run.open(config, arm, i, out, token, wrap=False)
-                        for i in range(config.runs)) if not r.complete]
+    runs = []
+    for i in range(config.runs):
+        run = Run.open(config, arm, i, out, token, wrap=False)
+        if run.complete:
+            run.close()
+        else:
+            runs.append(run)
     if not runs:
         return 0
     shield = Lockstep(runs, config, arm, shadow=mode == "shadow") if mode else None
@@ -415,6 +434,16 @@ class Lockstep:
         return out
 
 
+def _die_with_parent(parent: int) -> None:
+    """A worker ends with the process that started it, even one killed outright: an orphan
+    would go on appending to records that a restarted experiment is writing too."""
+    if sys.platform == "linux":
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+        if os.getppid() != parent:  # the parent died before the call
+            os._exit(1)
+
+
 def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None = None,
             bar: Any | None = None, lockstep: bool = False) -> int:
     """Every (arm, run) in its own process, at most ``workers`` at a time; with ``lockstep``
@@ -426,7 +455,9 @@ def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None
         else:
             jobs.extend((run_one, (config, arm, run, out, token)) for run in range(config.runs))
     context = multiprocessing.get_context("spawn")
-    with context.Manager() as manager, ProcessPoolExecutor(workers, mp_context=context) as pool:
+    with context.Manager() as manager, ProcessPoolExecutor(
+            workers, mp_context=context, initializer=_die_with_parent,
+            initargs=(os.getpid(),)) as pool:
         progress = manager.Queue()
         pending: set[Future[int]] = {pool.submit(job, *args, progress) for job, args in jobs}
         appended = 0

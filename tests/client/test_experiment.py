@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -156,3 +157,36 @@ def test_compare_puts_experiments_side_by_side(tmp_path: Path) -> None:
     assert rows[3].endswith('`{"reviser":{"flags":"overwrite"}}` |')
     assert rows[0].endswith(" - |")
     assert (tmp_path / "table.md").read_text() == result.stdout
+
+
+def test_two_processes_never_write_one_run(tmp_path: Path) -> None:
+    first = runner.Run.open(CONFIG, "idm-aggressive", 0, tmp_path, None)
+    try:
+        with pytest.raises(records.RecordError, match="another process is writing"):
+            runner.Run.open(CONFIG, "idm-aggressive", 0, tmp_path, None)
+    finally:
+        first.close()
+    runner.Run.open(CONFIG, "idm-aggressive", 0, tmp_path, None).close()  # free again
+
+
+def test_workers_end_with_a_killed_runner(tmp_path: Path) -> None:
+    """kill -9 of `client run` leaves no worker appending to its records."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "client", "run", "--arms", "idm", "--runs", "2", "--episodes",
+         "2000", "--lead", "synthetic", "--workers", "2", "--out", str(tmp_path)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    files = [records.path_for(tmp_path, "idm", run) for run in (0, 1)]
+
+    def lines() -> list[int]:
+        return [len(f.read_bytes().splitlines()) if f.exists() else 0 for f in files]
+
+    deadline = time.monotonic() + 60
+    while min(lines()) < 3 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert min(lines()) >= 3, "the runs did not start"
+    process.kill()
+    process.wait()
+    time.sleep(2)  # the workers' SIGTERM arrives at once; let any last episode land
+    settled = lines()
+    time.sleep(2)
+    assert lines() == settled
