@@ -403,13 +403,15 @@ class Shield:
     # --- views and persistence -------------------------------------------------------------
 
     def states(self) -> dict[str, Any]:
-        """Every state: centre in physical units, spread (normalised std), flag, visits."""
+        """Every state: centre in physical units, spread (normalised std), flag, visits, and
+        failures (states x criteria)."""
         names = [None] + [c.name for c in self.config.criteria]
         return {
             "centre": self._low + self.clusterer.centres * self._range,
             "spread": np.sqrt(self.clusterer.variances()),
             "flag": [names[f] for f in self.flags.flags],
             "visits": self.flags.visits.copy(),
+            "failures": self.flags.failures.copy(),
             "support": self.clusterer.support,
         }
 

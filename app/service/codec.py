@@ -86,6 +86,7 @@ def readable(shield: Shield, tpm: str = "sparse", action: int | None = None,
     """What a person reads: states in physical units and the matrices (``sparse`` keeps the
     entries of at least ``min_prob``; ``dense`` all of them; ``none`` leaves them out)."""
     states = shield.states()
+    criteria = [c.name for c in shield.config.criteria]
     out: dict[str, Any] = {
         "states": [
             {
@@ -94,6 +95,7 @@ def readable(shield: Shield, tpm: str = "sparse", action: int | None = None,
                 "spread": float(states["spread"][i]),
                 "flag": states["flag"][i],
                 "visits": int(states["visits"][i]),
+                "failures": dict(zip(criteria, states["failures"][i].tolist(), strict=True)),
             }
             for i in range(shield.n_states)
         ]

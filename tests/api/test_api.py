@@ -51,6 +51,8 @@ def test_episodes_flags_and_counters_through_the_api(client: TestClient) -> None
     snap = client.get("/model").json()
     assert snap["episodes"] == 1 and snap["steps"] == 7
     assert "collision" in [s["flag"] for s in snap["states"]]
+    assert sum(s["failures"]["collision"] for s in snap["states"]) == 1
+    assert sum(s["visits"] for s in snap["states"]) == 7
 
 
 def test_models_lifecycle(client: TestClient) -> None:
