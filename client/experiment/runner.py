@@ -107,19 +107,24 @@ def model_name(config: ExperimentConfig, arm: str, run: int) -> str:
     return f"{config.model_prefix}-{arm.replace('+', '-')}-{run}"
 
 
+def shield_config(config: ExperimentConfig, seed: int) -> ShieldConfig:
+    """The whole shield configuration of a run: the defaults, the overrides, the run's seed."""
+    overrides = dict(config.shield_config)
+    overrides["reviser"] = {**overrides.get("reviser", {}), "seed": seed}
+    return ShieldConfig.from_dict(overrides)
+
+
 def make_shield(config: ExperimentConfig, arm: str, run: int, seed: int,
                 token: str | None) -> StepShield:
     """A fresh, empty model for this run."""
-    overrides = dict(config.shield_config)
-    overrides["reviser"] = {**overrides.get("reviser", {}), "seed": seed}
-    shield_config = ShieldConfig.from_dict(overrides)
+    resolved = shield_config(config, seed)
     if config.shield == "local":
-        return LocalShield(shield_config)
+        return LocalShield(resolved)
     name = model_name(config, arm, run)
     with ShieldClient(config.shield, token=token) as admin:
         if name in {m["name"] for m in admin.models()}:
             admin.delete_model(name)
-        admin.create_model(name, shield_config.to_dict())
+        admin.create_model(name, resolved.to_dict())
     if config.transport == "http":
         return ShieldClient(config.shield, token=token, model=name)
     if config.transport == "batch":
@@ -207,15 +212,16 @@ class Run:
         path = records.path_for(out, arm, index)
         identity = {k: v for k, v in config.to_dict().items()
                     if k not in ("shield", "transport")}
+        _, mode = parse_arm(arm)
         header = {"config": config.to_dict(), "identity": identity, "arm": arm, "run": index,
-                  "seed": seed, "versions": versions()}
+                  "seed": seed, "versions": versions(),
+                  "shield": shield_config(config, seed).to_dict() if mode else None}
         claim = records.claim(path)
         try:
             recorded = records.start(path, header)
         except RecordError:
             claim.close()
             raise
-        _, mode = parse_arm(arm)
         env: Any = CarFollowingEnv(lead=profiles(config.lead),
                                    reward=RewardConfig(**config.reward))
         shield = None

@@ -190,3 +190,16 @@ def test_workers_end_with_a_killed_runner(tmp_path: Path) -> None:
     settled = lines()
     time.sleep(2)
     assert lines() == settled
+
+
+def test_a_shielded_run_records_its_whole_shield_configuration(tmp_path: Path) -> None:
+    """Overrides alone would not say what ``{}`` meant when the defaults were those of the
+    code that ran: the header keeps the resolved configuration with the run's seed."""
+    runner.Run.open(CONFIG, "idm-aggressive+shield", 0, tmp_path, None).close()
+    runner.Run.open(CONFIG, "idm-aggressive", 0, tmp_path, None).close()
+    header, _ = records.read(records.path_for(tmp_path, "idm-aggressive+shield", 0))
+    assert header["shield"]["reviser"]["activate_after_episodes"] == 2  # the override
+    assert header["shield"]["reviser"]["flags"] == "rate"  # a default
+    assert header["shield"]["reviser"]["seed"] == header["seed"]
+    plain, _ = records.read(records.path_for(tmp_path, "idm-aggressive", 0))
+    assert plain["shield"] is None
