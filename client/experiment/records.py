@@ -1,7 +1,8 @@
 """Per-episode records: one JSON Lines file per (arm, run), appended as episodes finish.
 
 The first line of every file is a header with the experiment's configuration, the shield's
-whole configuration as the run used it (shielded arms), the versions and the run's seed; every other line is one :class:`EpisodeRecord`.
+whole configuration as the run used it (shielded arms), the versions and the run's seed;
+every other line is one :class:`EpisodeRecord`.
 """
 
 from __future__ import annotations
