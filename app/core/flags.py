@@ -75,8 +75,8 @@ class StateFlags:
         if criterion is not None:
             self._failures[state, criterion] += 1
         old = int(self._flags[state])
-        if self.mode == "rate":
-            new = self._rate_flag(state)
+        if self.mode == "rate":  # a step without failure can lift a flag but never set one
+            new = self._rate_flag(state) if criterion is not None or old else NO_FLAG
         else:
             new = NO_FLAG if criterion is None else criterion + 1
             if self.mode == "sticky" and (new == NO_FLAG or NO_FLAG < old < new):
