@@ -217,18 +217,18 @@ class Run:
                   "seed": seed, "versions": versions(),
                   "shield": shield_config(config, seed).to_dict() if mode else None}
         claim = records.claim(path)
-        try:
+        try:  # a refused file or an unreachable shield releases the run's file at once
             recorded = records.start(path, header)
-        except RecordError:
+            env: Any = CarFollowingEnv(lead=profiles(config.lead),
+                                       reward=RewardConfig(**config.reward))
+            shield = None
+            if mode and len(recorded) < config.episodes:
+                shield = make_shield(config, arm, index, seed, token)
+                if wrap:
+                    env = ShieldWrapper(env, shield, shadow=mode == "shadow")
+        except BaseException:
             claim.close()
             raise
-        env: Any = CarFollowingEnv(lead=profiles(config.lead),
-                                   reward=RewardConfig(**config.reward))
-        shield = None
-        if mode and len(recorded) < config.episodes:
-            shield = make_shield(config, arm, index, seed, token)
-            if wrap:
-                env = ShieldWrapper(env, shield, shadow=mode == "shadow")
         return cls(config, arm, index, seed, path, recorded, env, shield, claim)
 
     @property

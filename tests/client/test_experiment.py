@@ -203,3 +203,12 @@ def test_a_shielded_run_records_its_whole_shield_configuration(tmp_path: Path) -
     assert header["shield"]["reviser"]["seed"] == header["seed"]
     plain, _ = records.read(records.path_for(tmp_path, "idm-aggressive", 0))
     assert plain["shield"] is None
+
+
+def test_an_unreachable_shield_releases_the_run(tmp_path: Path) -> None:
+    remote = dataclasses.replace(CONFIG, shield=f"http://127.0.0.1:{free_port()}")
+    with pytest.raises(Exception, match="unreachable|connect") as caught:
+        runner.Run.open(remote, "idm-aggressive+shield", 0, tmp_path, None)
+    # the traceback (alive in ``caught``) keeps the failed call's frame: the file is free anyway
+    assert caught.value.__traceback__ is not None
+    records.claim(records.path_for(tmp_path, "idm-aggressive+shield", 0)).close()
