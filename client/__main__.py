@@ -44,8 +44,9 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
             episodes=episodes, seed=seed, shield=shield, transport=transport,  # type: ignore[arg-type]
             lead=lead, shield_config=overrides)  # type: ignore[arg-type]
         if shield != "local":
-            with contextlib.closing(ShieldClient(shield, token=token)) as probe:
-                probe.health()
+            for url in config.shield_urls:
+                with contextlib.closing(ShieldClient(url, token=token)) as probe:
+                    probe.health()
         total = len(config.arms) * runs * episodes
         with tqdm(total=total, desc="episodes", unit="ep", disable=None) as bar:
             runner.run_all(config, out, workers, token, bar, lockstep)
@@ -65,7 +66,8 @@ def run(
     runs: Annotated[int, typer.Option(min=1)] = 10,
     episodes: Annotated[int, typer.Option(min=1)] = 1500,
     seed: Annotated[int, typer.Option(help="Base seed; runs get seeds spawned from it.")] = 1000,
-    shield: Annotated[str, typer.Option(help="'local' or the URL of a shield service.")]
+    shield: Annotated[str, typer.Option(
+        help="'local', or shield service URLs, comma-separated: run i uses the i-th in turn.")]
     = "local",
     transport: Annotated[str, typer.Option(help="http, ws or batch (remote shields).")] = "ws",
     out: Annotated[Path, typer.Option(help="Records, summary, table and figure go here.")]
@@ -88,10 +90,15 @@ def run(
 
 
 @cli.command("report")
-def report_command(directory: Path) -> None:
+def report_command(
+    directory: Path,
+    episodes: Annotated[int | None, typer.Option(
+        min=1, help="Only each run's first N episodes (runs stopped at different points).")]
+    = None,
+) -> None:
     """The paper's table and figure from the records in DIRECTORY."""
     try:
-        text, _ = report.write(directory)
+        text, _ = report.write(directory, episodes)
     except RecordError as error:
         fail(str(error))
     typer.echo(text)

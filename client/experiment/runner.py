@@ -49,7 +49,7 @@ class ExperimentConfig:
     runs: int = 10
     episodes: int = 1500
     seed: int = 1000
-    shield: str = "local"  # "local" or the URL of a shield service
+    shield: str = "local"  # "local", or the URLs of shield services, comma-separated
     transport: Literal["http", "ws", "batch"] = "ws"
     lead: Literal["train", "evaluation", "epa", "synthetic"] = "train"
     shield_config: dict[str, Any] = field(default_factory=dict)
@@ -62,6 +62,18 @@ class ExperimentConfig:
             parse_arm(arm)
         if self.runs < 1 or self.episodes < 1:
             raise ValueError("runs and episodes must be at least 1")
+        if "local" in self.shield_urls and self.shield != "local":
+            raise ValueError("the shield is 'local' or a list of URLs, not both")
+
+    @property
+    def shield_urls(self) -> list[str]:
+        return [url.strip() for url in self.shield.split(",")]
+
+    def shield_url(self, run: int) -> str:
+        """The service that holds run ``run``'s model: the URLs in turn, so that with one URL
+        per run each run has a sidecar of its own."""
+        urls = self.shield_urls
+        return urls[run % len(urls)]
 
     def to_dict(self) -> dict[str, Any]:
         return {k: list(v) if isinstance(v, tuple) else v
@@ -120,16 +132,16 @@ def make_shield(config: ExperimentConfig, arm: str, run: int, seed: int,
     resolved = shield_config(config, seed)
     if config.shield == "local":
         return LocalShield(resolved)
-    name = model_name(config, arm, run)
-    with ShieldClient(config.shield, token=token) as admin:
+    name, url = model_name(config, arm, run), config.shield_url(run)
+    with ShieldClient(url, token=token) as admin:
         if name in {m["name"] for m in admin.models()}:
             admin.delete_model(name)
         admin.create_model(name, resolved.to_dict())
     if config.transport == "http":
-        return ShieldClient(config.shield, token=token, model=name)
+        return ShieldClient(url, token=token, model=name)
     if config.transport == "batch":
-        return BatchShield(config.shield, token=token, model=name)
-    return ShieldSession(config.shield, token=token, model=name)
+        return BatchShield(url, token=token, model=name)
+    return ShieldSession(url, token=token, model=name)
 
 
 class EpisodeMeter:
@@ -393,9 +405,9 @@ def _finisher(run: Run, episode: int, meter: EpisodeMeter, info: dict[str, Any],
 
 
 class Lockstep:
-    """The shields of lockstep runs: over the batch transport, one request per round with the
-    pending episode ends first, then a step of every active run (each model sees its steps in
-    order); otherwise each run's own shield, in the same order."""
+    """The shields of lockstep runs: over the batch transport to one service, one request per
+    round with the pending episode ends first, then a step of every active run (each model sees
+    its steps in order); otherwise each run's own shield, in the same order."""
 
     def __init__(self, runs: list[Run], config: ExperimentConfig, arm: str,
                  shadow: bool) -> None:
@@ -403,7 +415,8 @@ class Lockstep:
         self.shadow = shadow
         self.names = [model_name(config, arm, r.index) for r in runs]
         first = runs[0].shield
-        self.batch = first if isinstance(first, BatchShield) else None
+        one_service = len(set(config.shield_urls)) == 1
+        self.batch = first if isinstance(first, BatchShield) and one_service else None
         self.closing: list[tuple[int, dict[str, Any], Callable[[Any], None]]] = []
 
     def close_episode(self, k: int, z: Any, event: str | None,

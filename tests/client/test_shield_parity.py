@@ -100,3 +100,45 @@ def test_runner_records_are_identical_in_process_and_over_the_network(
 
     assert episodes(local_dir) == episodes(remote_dir)
     assert sum(sum(r.interventions.values()) for r in episodes(local_dir)) > 0  # type: ignore[attr-defined]
+
+
+def test_runs_spread_over_sidecars_keep_their_records(
+    server: Server, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    """With one URL per run, run i's model lives on the i-th service alone, and the records
+    are those of the in-process shield."""
+    import dataclasses
+
+    from client.experiment import records, runner
+
+    config = runner.ExperimentConfig(
+        arms=("idm-aggressive+shield",), runs=2, episodes=3, seed=22, lead="synthetic",
+        shield_config={"reviser": {"activate_after_episodes": 1}}, model_prefix="sidecar")
+    sidecar = start_server(tmp_path_factory.mktemp("sidecar") / "data", "--fsync", "never")
+    try:
+        remote = dataclasses.replace(config, shield=f"{server.url}, {sidecar.url}")
+        local_dir, remote_dir = tmp_path_factory.mktemp("local"), tmp_path_factory.mktemp("sc")
+        for run in (0, 1):
+            runner.run_one(config, config.arms[0], run, local_dir)
+            runner.run_one(remote, config.arms[0], run, remote_dir)
+        for url, mine, other in ((server.url, 0, 1), (sidecar.url, 1, 0)):
+            with ShieldClient(url) as admin:
+                names = {m["name"] for m in admin.models()}
+            assert runner.model_name(config, config.arms[0], mine) in names
+            assert runner.model_name(config, config.arms[0], other) not in names
+    finally:
+        sidecar.stop()
+
+    for run in (0, 1):
+        local, remote_records = (
+            [dataclasses.replace(r, wall_s=0.0)
+             for r in records.read(records.path_for(d, config.arms[0], run))[1]]
+            for d in (local_dir, remote_dir))
+        assert local == remote_records
+
+
+def test_a_local_shield_is_not_mixed_with_urls() -> None:
+    from client.experiment import runner
+
+    with pytest.raises(ValueError, match="not both"):
+        runner.ExperimentConfig(shield="local,http://127.0.0.1:8000")
