@@ -2,14 +2,17 @@
 
 The first line of every file is a header with the experiment's configuration, the shield's
 whole configuration as the run used it (shielded arms), the versions and the run's seed;
-every other line is one :class:`EpisodeRecord`.
+every other line is one :class:`EpisodeRecord`. Finished experiments may be kept gzipped
+(``*.jsonl.gz``, as the committed results are); they read the same.
 """
 
 from __future__ import annotations
 
 import fcntl
+import gzip
 import json
 import os
+import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -87,11 +90,15 @@ def append(path: Path, record: EpisodeRecord) -> None:
 
 
 def read(path: Path) -> tuple[dict[str, Any], list[EpisodeRecord]]:
-    """The header and the episodes of one file; a torn last line is ignored."""
+    """The header and the episodes of one file, plain or gzipped; a torn last line is
+    ignored."""
     try:
-        lines = path.read_text().split("\n")
+        data = path.read_bytes()
+        lines = (gzip.decompress(data) if path.suffix == ".gz" else data).decode().split("\n")
     except OSError as error:
-        raise RecordError(f"{path}: {error.strerror}") from error
+        raise RecordError(f"{path}: {error.strerror or error}") from error
+    except (EOFError, zlib.error, UnicodeDecodeError) as error:
+        raise RecordError(f"{path}: damaged ({error})") from error
     try:
         header = json.loads(lines[0])["header"]
     except (ValueError, KeyError, TypeError) as error:
@@ -111,9 +118,13 @@ def read(path: Path) -> tuple[dict[str, Any], list[EpisodeRecord]]:
 
 def read_all(directory: Path) -> tuple[list[dict[str, Any]], list[EpisodeRecord]]:
     """Every header and episode under ``directory/records``."""
-    files = sorted((directory / "records").glob("*.jsonl"))
+    files = sorted([*(directory / "records").glob("*.jsonl"),
+                    *(directory / "records").glob("*.jsonl.gz")])
     if not files:
         raise RecordError(f"{directory}: no record files under records/")
+    runs = [path.name.removesuffix(".gz") for path in files]
+    if len(set(runs)) < len(runs):
+        raise RecordError(f"{directory}: a run is there both plain and gzipped; keep one")
     headers, episodes = [], []
     for path in files:
         header, records = read(path)

@@ -53,6 +53,7 @@ def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
             "collision": sum(r.outcome == "collision" for r in records),
             "never_fails_after": max(last_failure.values()),
             "never_fails_after_per_run": [last_failure[run] for run in runs],
+            "episodes_per_run": [sum(r.run == run for r in records) for run in runs],
             "speed_difference_mean": mean,
             "speed_difference_variance": var,
             "interventions": dict(interventions),
@@ -137,14 +138,32 @@ def figure(episodes: list[EpisodeRecord], path: Path) -> None:
     plt.close(fig)
 
 
-def write(directory: Path) -> tuple[str, dict[str, Any]]:
-    """summary.json, table.md and figure.png next to the records; returns the table."""
+def first_episodes(episodes: list[EpisodeRecord], limit: int) -> list[EpisodeRecord]:
+    """Each run's first ``limit`` episodes: experiments stopped at different points (every
+    run of an arm at its own pace) compared on equal footing. Every run must have reached
+    ``limit``."""
+    counts: dict[tuple[str, int], int] = defaultdict(int)
+    for r in episodes:
+        counts[(r.arm, r.run)] += 1
+    short = sorted(key for key, count in counts.items() if count < limit)
+    if short:
+        arm, run = short[0]
+        raise RecordError(f"run {run} of {arm} has only {counts[short[0]]} episodes; "
+                          f"--episodes must be at most {min(counts.values())}")
+    return [r for r in episodes if r.episode <= limit]
+
+
+def write(directory: Path, limit: int | None = None) -> tuple[str, dict[str, Any]]:
+    """summary.json, table.md and figure.png next to the records (of each run's first
+    ``limit`` episodes, if given); returns the table."""
     headers, episodes = read_all(directory)
     if not episodes:
         raise RecordError(f"{directory}: the record files hold no episode yet")
+    if limit is not None:
+        episodes = first_episodes(episodes, limit)
     summary = summarise(episodes)
     summary_doc = {"arms": summary, "config": headers[0]["config"],
-                   "versions": headers[0]["versions"]}
+                   "versions": headers[0]["versions"], "episode_limit": limit}
     (directory / "summary.json").write_text(json.dumps(summary_doc, indent=2))
     text = table(summary)
     (directory / "table.md").write_text(text + "\n")

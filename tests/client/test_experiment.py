@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import gzip
+import json
 import subprocess
 import sys
 import time
@@ -94,6 +96,41 @@ def test_ddpg_is_deterministic_for_a_seed() -> None:
 
     assert train(1) == train(1)
     assert train(1) != train(2)
+
+
+def test_gzipped_records_report_the_same(tmp_path: Path) -> None:
+    """Committed results keep their records gzipped; the report reads them unchanged."""
+    plain, packed = tmp_path / "plain", tmp_path / "packed"
+    runner.run_one(CONFIG, "idm-aggressive", 0, plain)
+    source = records.path_for(plain, "idm-aggressive", 0)
+    (packed / "records").mkdir(parents=True)
+    (packed / "records" / (source.name + ".gz")).write_bytes(gzip.compress(source.read_bytes()))
+    assert report.write(packed)[1] == report.write(plain)[1]
+    (packed / "records" / source.name).write_bytes(source.read_bytes())
+    with pytest.raises(records.RecordError, match="both plain and gzipped"):
+        records.read_all(packed)
+    (packed / "records" / source.name).unlink()
+    (packed / "records" / (source.name + ".gz")).write_bytes(b"\x1f\x8b not really gzip")
+    with pytest.raises(records.RecordError, match="damaged|gzip"):
+        records.read_all(packed)
+
+
+def test_report_of_each_runs_first_episodes(tmp_path: Path) -> None:
+    """Runs stopped at different points are compared over the episodes all of them reached."""
+    runner.run_one(CONFIG, "idm-aggressive", 0, tmp_path)
+    shorter = dataclasses.replace(CONFIG, episodes=5)
+    path = records.path_for(tmp_path, "idm-aggressive", 1)
+    records.start(path, {"identity": "other run"})
+    for r in records.read(records.path_for(tmp_path, "idm-aggressive", 0))[1][:shorter.episodes]:
+        records.append(path, dataclasses.replace(r, run=1))
+    summary = report.write(tmp_path, 5)[1]["idm-aggressive"]
+    assert summary["episodes"] == 10 and summary["episodes_per_run"] == [5, 5]
+    assert json.loads((tmp_path / "summary.json").read_text())["episode_limit"] == 5
+    assert report.write(tmp_path)[1]["idm-aggressive"]["episodes_per_run"] == [8, 5]
+    result = cli("report", str(tmp_path), "--episodes", "6")
+    assert result.returncode == 2
+    assert "run 1 of idm-aggressive has only 5 episodes; --episodes must be at most 5" \
+        in result.stderr
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
