@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# The paper's protocol: 10 runs x 1500 episodes of ddpg and ddpg+shield on the evaluation seeds
+# (base seed 1000), CMAP training traces, default shield configuration. Every shielded run asks
+# a shield service of its own over WebSocket (a sidecar per controller, in-memory models); all
+# 20 runs train in parallel processes, so it wants 16 cores or more.
+#
+#   results/paper-protocol.sh [OUT]          (default OUT: results/paper-protocol)
+#
+# RUNS and EPISODES override the sizes; PYTHON names an interpreter that already has the
+# project's packages (otherwise .venv is made as scripts/test makes it). Resumable: run it again
+# with the same OUT to continue (records are appended per episode).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=${1:-results/paper-protocol}
+runs=${RUNS:-10}
+episodes=${EPISODES:-1500}
+if [ -z "${PYTHON:-}" ]; then
+    source scripts/_venv.sh
+    PYTHON=.venv/bin/python
+fi
+mkdir -p "$out/services"
+
+services=()
+trap 'kill "${services[@]}" 2>/dev/null || true' EXIT
+urls=()
+for ((i = 0; i < runs; i++)); do
+    port=$((8300 + i))
+    "$PYTHON" -m app serve --host 127.0.0.1 --port "$port" >"$out/services/shield-$i.log" 2>&1 &
+    services+=($!)
+    urls+=("http://127.0.0.1:$port")
+done
+"$PYTHON" - "${urls[@]}" <<'WAIT'
+import sys, time, httpx
+for url in sys.argv[1:]:
+    for _ in range(300):
+        try:
+            if httpx.get(url + "/readyz", timeout=1).status_code == 200:
+                break
+        except httpx.TransportError:
+            pass
+        time.sleep(0.1)
+    else:
+        sys.exit(f"the shield service at {url} did not start")
+WAIT
+
+{
+    echo "started: $(date -u +%FT%TZ)"
+    echo "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | xargs), $(nproc --all) cores"
+    echo "runs: $runs x $episodes episodes per arm, $((2 * runs)) worker processes"
+} >"$out/machine.txt"
+start=$(date +%s)
+"$PYTHON" -m client run --arms ddpg,ddpg+shield --runs "$runs" --episodes "$episodes" \
+    --seed 1000 --shield "$(IFS=,; echo "${urls[*]}")" --transport ws \
+    --workers $((2 * runs)) --out "$out"
+echo "wall: $(($(date +%s) - start)) s" >>"$out/machine.txt"
