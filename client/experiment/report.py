@@ -25,6 +25,14 @@ def pooled(records: list[EpisodeRecord]) -> tuple[float | None, float | None]:
     return total, float((n * (var + mean**2)).sum() / n.sum() - total**2)
 
 
+def by_hundred(records: list[EpisodeRecord]) -> list[float]:
+    """Success rate over all runs in episodes 1-100, 101-200, ...: how learning goes on."""
+    blocks: dict[int, list[bool]] = defaultdict(list)
+    for r in records:
+        blocks[(r.episode - 1) // 100].append(r.outcome == "success")
+    return [float(np.mean(blocks[b])) for b in sorted(blocks)]
+
+
 def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
     """Per arm: the table's counts, the episode after which each run never fails, speed
     differences over successful episodes, and interventions."""
@@ -54,6 +62,7 @@ def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
             "never_fails_after": max(last_failure.values()),
             "never_fails_after_per_run": [last_failure[run] for run in runs],
             "episodes_per_run": [sum(r.run == run for r in records) for run in runs],
+            "success_rate_per_100_episodes": by_hundred(records),
             "speed_difference_mean": mean,
             "speed_difference_variance": var,
             "interventions": dict(interventions),

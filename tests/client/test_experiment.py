@@ -71,6 +71,9 @@ def test_summary_numbers_by_hand() -> None:
     assert s["speed_difference_variance"] == pytest.approx(second - mean**2)
     assert s["interventions"] == {"collision": 3}
     assert "| a | 2 | 6 | 3 (50.0%) | 1 | 2 | 3 |" in report.table({"a": s})
+    later = [record(0, 101, "success"), record(1, 101, "collision"), record(0, 250, "success")]
+    assert report.summarise(rows + later)["a"]["success_rate_per_100_episodes"] == [
+        0.5, 0.5, 1.0]
 
 
 def test_report_writes_summary_table_and_figure(tmp_path: Path) -> None:
