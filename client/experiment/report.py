@@ -25,12 +25,24 @@ def pooled(records: list[EpisodeRecord]) -> tuple[float | None, float | None]:
     return total, float((n * (var + mean**2)).sum() / n.sum() - total**2)
 
 
-def by_hundred(records: list[EpisodeRecord]) -> list[float]:
-    """Success rate over all runs in episodes 1-100, 101-200, ...: how learning goes on."""
-    blocks: dict[int, list[bool]] = defaultdict(list)
+def by_hundred(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
+    """The outcomes over all runs in episodes 1-100, 101-200, ...: how learning goes on, and
+    whether the shield helps early or late."""
+    blocks: dict[int, list[EpisodeRecord]] = defaultdict(list)
     for r in records:
-        blocks[(r.episode - 1) // 100].append(r.outcome == "success")
-    return [float(np.mean(blocks[b])) for b in sorted(blocks)]
+        blocks[(r.episode - 1) // 100].append(r)
+    rows = []
+    for b in sorted(blocks):
+        block = blocks[b]
+        rows.append({
+            "episodes": f"{100 * b + 1}-{max(r.episode for r in block)}",
+            "success_rate": float(np.mean([r.outcome == "success" for r in block])),
+            "large_distance": sum(r.outcome == "large_distance" for r in block),
+            "collision": sum(r.outcome == "collision" for r in block),
+            "interventions_per_episode": float(np.mean(
+                [sum(r.interventions.values()) for r in block])),
+        })
+    return rows
 
 
 def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
@@ -62,7 +74,7 @@ def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
             "never_fails_after": max(last_failure.values()),
             "never_fails_after_per_run": [last_failure[run] for run in runs],
             "episodes_per_run": [sum(r.run == run for r in records) for run in runs],
-            "success_rate_per_100_episodes": by_hundred(records),
+            "per_100_episodes": by_hundred(records),
             "speed_difference_mean": mean,
             "speed_difference_variance": var,
             "interventions": dict(interventions),
@@ -91,6 +103,18 @@ def table(summary: dict[str, Any], notes: dict[str, str] | None = None) -> str:
             f"| {s['never_fails_after']} | {number(s['speed_difference_mean'])} "
             f"| {number(s['speed_difference_variance'])} | {sum(s['interventions'].values())} "
             f"|{note}")
+    return "\n".join(lines)
+
+
+def blocks_table(summary: dict[str, Any]) -> str:
+    """Success, failures and interventions per block of 100 episodes, a row per arm and block."""
+    lines = ["| arm | episodes | success | large distance | collision "
+             "| interventions per episode |", "|---|---|---:|---:|---:|---:|"]
+    for arm, s in summary.items():
+        for b in s["per_100_episodes"]:
+            lines.append(f"| {arm} | {b['episodes']} | {100 * b['success_rate']:.1f}% "
+                         f"| {b['large_distance']} | {b['collision']} "
+                         f"| {b['interventions_per_episode']:.1f} |")
     return "\n".join(lines)
 
 
@@ -174,7 +198,8 @@ def write(directory: Path, limit: int | None = None) -> tuple[str, dict[str, Any
     summary_doc = {"arms": summary, "config": headers[0]["config"],
                    "versions": headers[0]["versions"], "episode_limit": limit}
     (directory / "summary.json").write_text(json.dumps(summary_doc, indent=2))
-    text = table(summary)
+    text = f"{table(summary)}\n\nPer block of 100 episodes, all runs together:\n\n" \
+           f"{blocks_table(summary)}"
     (directory / "table.md").write_text(text + "\n")
     figure(episodes, directory / "figure.png")
     return text, summary

@@ -72,8 +72,11 @@ def test_summary_numbers_by_hand() -> None:
     assert s["interventions"] == {"collision": 3}
     assert "| a | 2 | 6 | 3 (50.0%) | 1 | 2 | 3 |" in report.table({"a": s})
     later = [record(0, 101, "success"), record(1, 101, "collision"), record(0, 250, "success")]
-    assert report.summarise(rows + later)["a"]["success_rate_per_100_episodes"] == [
-        0.5, 0.5, 1.0]
+    blocks = report.summarise(rows + later)["a"]["per_100_episodes"]
+    assert [b["episodes"] for b in blocks] == ["1-3", "101-101", "201-250"]
+    assert [b["success_rate"] for b in blocks] == [0.5, 0.5, 1.0]
+    assert [(b["large_distance"], b["collision"]) for b in blocks] == [(1, 2), (0, 1), (0, 0)]
+    assert blocks[0]["interventions_per_episode"] == pytest.approx(3 / 6)
 
 
 def test_report_writes_summary_table_and_figure(tmp_path: Path) -> None:
@@ -83,6 +86,8 @@ def test_report_writes_summary_table_and_figure(tmp_path: Path) -> None:
     for name in ("summary.json", "table.md", "figure.png"):
         assert (tmp_path / name).stat().st_size > 0
     assert text.splitlines()[2].startswith("| idm-aggressive |")
+    successes = summary["idm-aggressive"]["successes"]
+    assert f"| idm-aggressive | 1-8 | {100 * successes / 8:.1f}% |" in text
 
 
 def test_ddpg_is_deterministic_for_a_seed() -> None:
