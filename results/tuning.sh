@@ -1,16 +1,39 @@
 #!/usr/bin/env bash
-# Tuning (base seed 0, never the evaluation seeds): 2 runs x 150 episodes of the shielded arm
-# per candidate, in-process shields; then one table (results/tuning/tuning.md).
+# Tuning (base seed 0, never the evaluation seeds), in-process shields, one table per question.
+#   1. epsilon: 2 runs x 150 episodes of the shielded arm per candidate (results/tuning/tuning.md)
+#   2. the switches that did better than the default on the reduced protocol, the rate of the
+#      count-based flags, and DDPG alone: 2 runs x 250 episodes each
+#      (results/tuning/switches/switches.md)
+# Resumable: finished experiments are skipped.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/_venv.sh
+experiments() {  # OUT EPISODES, then lines "NAME;ARM;SHIELD-OVERRIDES" on stdin
+    while IFS=';' read -r name arm overrides; do
+        .venv/bin/python -m client run --arms "$arm" --shield-config "$overrides" \
+            --out "$1/$name" --runs 2 --episodes "$2" --seed 0 --shield local --workers 2 \
+            >/dev/null
+    done
+}
 out=results/tuning
-while IFS=';' read -r name overrides; do
-    .venv/bin/python -m client run --arms ddpg+shield --shield-config "$overrides" \
-        --out "$out/$name" --runs 2 --episodes 150 --seed 0 --shield local --workers 2 >/dev/null
-done <<'JOBS'
-default;{}
-epsilon-0.1;{"clustering": {"epsilon": 0.1}}
-epsilon-0.05;{"clustering": {"epsilon": 0.05}}
+experiments "$out" 150 <<'JOBS'
+default;ddpg+shield;{}
+epsilon-0.1;ddpg+shield;{"clustering": {"epsilon": 0.1}}
+epsilon-0.05;ddpg+shield;{"clustering": {"epsilon": 0.05}}
 JOBS
 .venv/bin/python -m client compare "$out"/{default,epsilon-0.1,epsilon-0.05} --out "$out/tuning.md"
+
+out=results/tuning/switches
+experiments "$out" 250 <<'JOBS'
+default;ddpg+shield;{}
+inspect-first-index;ddpg+shield;{"reviser": {"inspect": "first_index"}}
+noise-std;ddpg+shield;{"reviser": {"noise": "std"}}
+horizon-2;ddpg+shield;{"reviser": {"horizon": 2}}
+flags-overwrite;ddpg+shield;{"reviser": {"flags": "overwrite"}}
+flag-rate-0.001;ddpg+shield;{"reviser": {"flag_min_rate": 0.001}}
+flag-rate-0.005;ddpg+shield;{"reviser": {"flag_min_rate": 0.005}}
+ddpg;ddpg;{}
+JOBS
+.venv/bin/python -m client compare "$out"/{ddpg,default,inspect-first-index,noise-std,horizon-2} \
+    "$out"/{flags-overwrite,flag-rate-0.001,flag-rate-0.005} \
+    --out "$out/switches.md"
