@@ -6,14 +6,16 @@
 #
 #   results/paper-protocol.sh [OUT]          (default OUT: results/paper-protocol)
 #
-# RUNS and EPISODES override the sizes; PYTHON names an interpreter that already has the
-# project's packages (otherwise .venv is made as scripts/test makes it). Resumable: run it again
-# with the same OUT to continue (records are appended per episode).
+# RUNS and EPISODES override the sizes, PORT the first of the services' ports (8300); PYTHON
+# names an interpreter that already has the project's packages (otherwise .venv is made as
+# scripts/test makes it). Resumable: run it again with the same OUT to continue (records are
+# appended per episode).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-results/paper-protocol}
 runs=${RUNS:-10}
 episodes=${EPISODES:-1500}
+first_port=${PORT:-8300}
 if [ -z "${PYTHON:-}" ]; then
     source scripts/_venv.sh
     PYTHON=.venv/bin/python
@@ -21,10 +23,10 @@ fi
 mkdir -p "$out/services"
 
 services=()
-trap 'kill "${services[@]}" 2>/dev/null || true' EXIT
+trap 'kill "${services[@]}" 2>/dev/null || true; wait' EXIT  # and wait: no service outlives the run
 urls=()
 for ((i = 0; i < runs; i++)); do
-    port=$((8300 + i))
+    port=$((first_port + i))
     "$PYTHON" -m app serve --host 127.0.0.1 --port "$port" >"$out/services/shield-$i.log" 2>&1 &
     services+=($!)
     urls+=("http://127.0.0.1:$port")

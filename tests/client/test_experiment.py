@@ -5,11 +5,13 @@ from __future__ import annotations
 import dataclasses
 import gzip
 import json
+import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+import httpx
 import numpy as np
 import pytest
 import torch
@@ -257,3 +259,28 @@ def test_an_unreachable_shield_releases_the_run(tmp_path: Path) -> None:
     # the traceback (alive in ``caught``) keeps the failed call's frame: the file is free anyway
     assert caught.value.__traceback__ is not None
     records.claim(records.path_for(tmp_path, "idm-aggressive+shield", 0)).close()
+
+
+def test_the_paper_protocol_script_runs_every_shielded_run_on_its_own_service(
+        tmp_path: Path) -> None:
+    """results/paper-protocol.sh at a toy size: its services start, each shielded run gets one,
+    the report is written and the services are gone afterwards."""
+    root = Path(__file__).resolve().parents[2]
+    port = free_port()
+    env = {**os.environ, "RUNS": "2", "EPISODES": "2", "PORT": str(port),
+           "PYTHON": sys.executable}
+    result = subprocess.run(["bash", str(root / "results/paper-protocol.sh"), str(tmp_path)],
+                            env=env, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    headers, episodes = records.read_all(tmp_path)
+    shields = {h["config"]["shield"] for h in headers}
+    assert shields == {f"http://127.0.0.1:{port},http://127.0.0.1:{port + 1}"}
+    assert len(episodes) == 2 * 2 * 2
+    for run in (0, 1):  # each service log shows the one model it held
+        log = (tmp_path / "services" / f"shield-{run}.log").read_text()
+        assert f"exp-ddpg-shield-{run}" in log and f"exp-ddpg-shield-{1 - run}" not in log
+    assert "wall:" in (tmp_path / "machine.txt").read_text()
+    assert (tmp_path / "table.md").exists()
+    for offset in (0, 1):
+        with pytest.raises(httpx.TransportError):
+            httpx.get(f"http://127.0.0.1:{port + offset}/healthz", timeout=1)
