@@ -4,15 +4,17 @@
 #   2. the switches that did better than the default on the reduced protocol, the rate of the
 #      count-based flags, and DDPG alone: 2 runs x 250 episodes each
 #      (results/tuning/switches/switches.md)
+#   3. DDPG alone and the default again on two more tuning runs, base seed 1
+#      (results/tuning/seed-1/seed-1.md)
 # Resumable: finished experiments are skipped.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/_venv.sh
-experiments() {  # OUT EPISODES, then lines "NAME;ARM;SHIELD-OVERRIDES" on stdin
+experiments() {  # OUT EPISODES [SEED], then lines "NAME;ARM;SHIELD-OVERRIDES" on stdin
     while IFS=';' read -r name arm overrides; do
         .venv/bin/python -m client run --arms "$arm" --shield-config "$overrides" \
-            --out "$1/$name" --runs 2 --episodes "$2" --seed 0 --shield local --workers 2 \
-            >/dev/null
+            --out "$1/$name" --runs 2 --episodes "$2" --seed "${3:-0}" --shield local \
+            --workers 2 >/dev/null
     done
 }
 out=results/tuning
@@ -37,3 +39,10 @@ JOBS
 .venv/bin/python -m client compare "$out"/{ddpg,default,inspect-first-index,noise-std,horizon-2} \
     "$out"/{flags-overwrite,flag-rate-0.001,flag-rate-0.005} \
     --out "$out/switches.md"
+
+out=results/tuning/seed-1
+experiments "$out" 250 1 <<'JOBS'
+ddpg;ddpg;{}
+default;ddpg+shield;{}
+JOBS
+.venv/bin/python -m client compare "$out"/{ddpg,default} --out "$out/seed-1.md"
