@@ -31,19 +31,13 @@ for ((i = 0; i < runs; i++)); do
     services+=($!)
     urls+=("http://127.0.0.1:$port")
 done
-"$PYTHON" - "${urls[@]}" <<'WAIT'
-import sys, time, httpx
-for url in sys.argv[1:]:
-    for _ in range(300):
-        try:
-            if httpx.get(url + "/readyz", timeout=1).status_code == 200:
-                break
-        except httpx.TransportError:
-            pass
-        time.sleep(0.1)
-    else:
-        sys.exit(f"the shield service at {url} did not start")
-WAIT
+for ((i = 0; i < runs; i++)); do
+    until EFSM_PORT=$((first_port + i)) "$PYTHON" -m app.healthcheck; do
+        kill -0 "${services[i]}" 2>/dev/null ||
+            { echo "shield service $i did not start; see $out/services/shield-$i.log" >&2; exit 1; }
+        sleep 0.2
+    done
+done
 
 {
     echo "started: $(date -u +%FT%TZ)"
