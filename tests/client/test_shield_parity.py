@@ -142,3 +142,28 @@ def test_a_local_shield_is_not_mixed_with_urls() -> None:
 
     with pytest.raises(ValueError, match="not both"):
         runner.ExperimentConfig(shield="local,http://127.0.0.1:8000")
+
+
+def test_lockstep_over_the_batch_route_with_a_service_per_run(
+    server: Server, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    """Lockstep runs on several services step each model on its own service (one batch
+    request per round would reach only the first) and record every episode."""
+    from client.experiment import records, runner
+
+    sidecar = start_server(tmp_path_factory.mktemp("lockstep") / "data", "--fsync", "never")
+    try:
+        config = runner.ExperimentConfig(
+            arms=("ddpg+shield",), runs=2, episodes=2, seed=23, lead="synthetic",
+            shield=f"{server.url},{sidecar.url}", transport="batch",
+            shield_config={"reviser": {"activate_after_episodes": 1}},
+            model_prefix="lockstep-sidecar")
+        out = tmp_path_factory.mktemp("lockstep-out")
+        assert runner.run_lockstep(config, config.arms[0], out) == 4
+        for run, url in enumerate((server.url, sidecar.url)):
+            assert len(records.read(records.path_for(out, config.arms[0], run))[1]) == 2
+            with ShieldClient(url) as admin:
+                model = admin.snapshot(runner.model_name(config, config.arms[0], run), tpm="none")
+            assert model["episodes"] == 2
+    finally:
+        sidecar.stop()
