@@ -12,12 +12,11 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
-from contextlib import ExitStack
+from http import HTTPStatus
 from typing import Any
 
 import httpx
-from websockets.exceptions import WebSocketException
-from websockets.sync.client import ClientConnection, connect
+import websocket
 
 from app.core import Candidate, Decision
 
@@ -223,25 +222,41 @@ class BatchShield:
 
 
 class ShieldSession:
-    """One WebSocket connection: each step one frame, replies in order."""
+    """One WebSocket connection: each step one frame, replies in order.
+
+    Frames are read on the calling thread (websocket-client), with no reader thread of its own
+    to hand them over: a training loop that asks for every action waits for nothing else.
+    """
 
     def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
                  timeout: float = DEFAULT_TIMEOUT) -> None:
         ws_url = url.replace("http://", "ws://", 1).replace("https://", "wss://", 1)
         ws_url = ws_url.rstrip("/") + ("/ws" if model is None else f"/models/{model}/ws")
-        headers = {"Authorization": f"Bearer {token}"} if token else None
-        self.timeout = timeout
-        self._stack = ExitStack()
+        header = [f"Authorization: Bearer {token}"] if token else None
         try:
-            self._ws: ClientConnection = self._stack.enter_context(
-                connect(ws_url, additional_headers=headers, open_timeout=timeout))
-        except (OSError, WebSocketException) as error:
+            # replies are decoded strictly as UTF-8 by recv(); the library's own byte-by-byte
+            # check in Python would cost more than the step
+            self._ws = websocket.create_connection(ws_url, timeout=timeout, header=header,
+                                                   skip_utf8_validation=True)
+        except websocket.WebSocketBadStatusException as error:
+            if error.status_code == HTTPStatus.FORBIDDEN:  # refused before the handshake
+                raise ShieldAPIError(error.status_code, "unauthorized",
+                                     "missing or wrong bearer token", None) from error
+            raise ShieldUnavailable(f"shield at {ws_url} refused the session: {error}") \
+                from error
+        except (OSError, websocket.WebSocketException) as error:
             raise ShieldUnavailable(f"shield at {ws_url} unreachable: {error}") from error
+
+    def _send(self, text: str) -> None:
+        try:
+            self._ws.send(text)
+        except (OSError, websocket.WebSocketException) as error:
+            raise ShieldUnavailable(f"WebSocket session lost: {error}") from error
 
     def _receive(self) -> dict[str, Any]:
         try:
-            reply: dict[str, Any] = json.loads(self._ws.recv(timeout=self.timeout))
-        except (OSError, WebSocketException, TimeoutError) as error:
+            reply: dict[str, Any] = json.loads(self._ws.recv())
+        except (OSError, websocket.WebSocketException, ValueError) as error:
             raise ShieldUnavailable(f"WebSocket session lost: {error}") from error
         return reply
 
@@ -255,19 +270,19 @@ class ShieldSession:
 
     def revise(self, observation: Sequence[float], action: float | None,
                **options: Any) -> Decision:
-        self._ws.send(json.dumps(step_body(observation, action, **options)))
+        self._send(json.dumps(step_body(observation, action, **options)))
         return self._decision(self._receive())
 
     def revise_batch(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
         """Send every step, then read every reply (pipelined, in order); errors are raised
         after all replies are read, so the session stays in step."""
         for step in steps:
-            self._ws.send(json.dumps(step))
+            self._send(json.dumps(step))
         replies = [self._receive() for _ in steps]
         return [self._decision(r) for r in replies]
 
     def close(self) -> None:
-        self._stack.close()
+        self._ws.close()
 
     def __enter__(self) -> ShieldSession:
         return self

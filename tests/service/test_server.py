@@ -107,6 +107,33 @@ def test_the_three_clients_agree_with_each_other(live_server: Server) -> None:
 def test_an_unreachable_shield_is_one_clear_error() -> None:
     with pytest.raises(ShieldUnavailable, match="unreachable"):
         ShieldClient(f"http://127.0.0.1:{free_port()}", timeout=1).health()
+    with pytest.raises(ShieldUnavailable, match="unreachable"):
+        ShieldSession(f"http://127.0.0.1:{free_port()}", timeout=1)
+
+
+def test_the_websocket_session_names_each_error_and_stays_in_step(tmp_path: Path) -> None:
+    server = start_server(tmp_path / "data", "--token", "secret")
+    try:
+        with pytest.raises(ShieldAPIError) as refused:
+            ShieldSession(server.url, token="wrong")
+        assert (refused.value.status, refused.value.code) == (403, "unauthorized")
+        with ShieldSession(server.url, token="secret", model="nobody") as missing:
+            with pytest.raises(ShieldAPIError) as unknown:
+                missing.revise([10.0, 50.0, 12.0], 0.5)
+        assert (unknown.value.status, unknown.value.code) == (404, "unknown_model")
+        with ShieldSession(server.url, token="secret") as session:
+            first = session.revise([10.0, 50.0, 12.0], 0.5)
+            with pytest.raises(ShieldAPIError) as bad:
+                session.revise([10.0, 50.0], 0.5)
+            assert (bad.value.status, bad.value.code, bad.value.field) == (
+                422, "invalid_observation", "observation")
+            after = session.revise([10.0, 50.0, 12.0], 0.5)  # the session goes on
+            assert after.model_version == first.model_version + 1
+            server.kill()
+            with pytest.raises(ShieldUnavailable, match="session lost"):
+                session.revise([10.0, 50.0, 12.0], 0.5)
+    finally:
+        server.stop()
 
 
 def test_settings_come_from_the_environment_too(tmp_path: Path) -> None:
