@@ -173,9 +173,14 @@ def strict_client() -> Iterator[TestClient]:
 def test_token_is_required_everywhere_but_health(strict_client: TestClient) -> None:
     c = strict_client
     assert c.get("/healthz").status_code == 200 and c.get("/readyz").status_code == 200
-    for method, path in [("post", "/revise"), ("get", "/models"), ("get", "/model"),
-                         ("get", "/metrics"), ("post", "/models/default/reset")]:
-        r = getattr(c, method)(path, json=STEP) if method == "post" else c.get(path)
+    for method, path in [("post", "/revise"), ("post", "/models/default/revise"),
+                         ("get", "/models"), ("get", "/model"), ("get", "/metrics"),
+                         ("post", "/models/default/reset"), ("batch", "/revise/batch"),
+                         ("batch", "/models/default/revise/batch")]:
+        if method == "batch":
+            r = c.post(path, json={"steps": [{**STEP, "model": "default"}]})
+        else:
+            r = getattr(c, method)(path, json=STEP) if method == "post" else c.get(path)
         assert r.status_code == 401, path
         assert r.json()["error"]["code"] == "unauthorized"
     wrong = {"Authorization": "Bearer nope"}
@@ -248,6 +253,10 @@ def test_openapi_documents_every_request_field(client: TestClient) -> None:
         assert field.get("description"), name
     assert request.get("examples")
     assert "/models/{name}/revise/batch" in schema["paths"]
+    scheme = next(iter(schema["components"]["securitySchemes"].values()))
+    assert scheme["scheme"] == "bearer"
+    assert schema["paths"]["/revise"]["post"]["security"]  # the token is documented
+    assert "security" not in schema["paths"]["/healthz"]["get"]  # health needs none
 
 
 def test_the_default_model_takes_its_configuration_from_a_file(tmp_path: Any) -> None:

@@ -9,7 +9,7 @@ from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
 from app.api.convert import to_step
-from app.api.deps import RegistryDep, SettingsDep, require_token
+from app.api.deps import BEARER_DOCUMENTED, RegistryDep, SettingsDep, check_token, require_token
 from app.api.errors import TooLarge
 from app.api.schemas import (
     BatchRequest,
@@ -26,7 +26,7 @@ from app.service.registry import DEFAULT_MODEL, ModelRegistry, Step
 ERRORS: dict[int | str, dict[str, object]] = {
     code: {"model": ErrorBody} for code in (401, 404, 413, 422)
 }
-router = APIRouter(tags=["revise"], dependencies=[Depends(require_token)], responses=ERRORS)
+router = APIRouter(tags=["revise"], responses=ERRORS)
 NamePath = Annotated[str, Path(pattern=r"^[a-z0-9][a-z0-9_-]{0,63}$", description="Model name.")]
 
 
@@ -45,19 +45,19 @@ def count(request: Request | WebSocket, name: str, decisions: list[CoreDecision]
         counter.labels(name, d.reason).inc()
 
 
-@router.post("/models/{name}/revise", response_model=Decision)
-async def revise_model(name: NamePath, body: ReviseRequest, registry: RegistryDep,
-                       request: Request) -> JSONResponse:
+@router.post("/models/{name}/revise", response_model=Decision, openapi_extra=BEARER_DOCUMENTED)
+async def revise_model(name: NamePath, body: ReviseRequest, request: Request) -> JSONResponse:
     """Answer one proposed action of a stream with the decision record."""
-    decision = await step_one(registry, name, to_step(body))
+    check_token(request)
+    decision = await step_one(request.app.state.registry, name, to_step(body))
     count(request, name, [decision])
     return JSONResponse(decision_json(decision))
 
 
-@router.post("/revise", response_model=Decision)
-async def revise(body: ReviseRequest, registry: RegistryDep, request: Request) -> JSONResponse:
+@router.post("/revise", response_model=Decision, openapi_extra=BEARER_DOCUMENTED)
+async def revise(body: ReviseRequest, request: Request) -> JSONResponse:
     """One step of the 'default' model."""
-    return await revise_model(DEFAULT_MODEL, body, registry, request)
+    return await revise_model(DEFAULT_MODEL, body, request)
 
 
 def check_size(n: int, limit: int) -> None:
@@ -65,7 +65,8 @@ def check_size(n: int, limit: int) -> None:
         raise TooLarge(f"a batch holds at most {limit} steps, got {n}", field="steps")
 
 
-@router.post("/models/{name}/revise/batch", response_model=BatchResponse)
+@router.post("/models/{name}/revise/batch", response_model=BatchResponse,
+             dependencies=[Depends(require_token)])
 def revise_batch(name: NamePath, body: BatchRequest, registry: RegistryDep,
                  settings: SettingsDep, request: Request) -> JSONResponse:
     """Steps of one model, applied in order; one bad step rejects the whole batch."""
@@ -75,7 +76,7 @@ def revise_batch(name: NamePath, body: BatchRequest, registry: RegistryDep,
     return JSONResponse({"decisions": [decision_json(d) for d in decisions]})
 
 
-@router.post("/revise/batch", response_model=BatchResponse)
+@router.post("/revise/batch", response_model=BatchResponse, dependencies=[Depends(require_token)])
 def revise_across(body: ModelBatchRequest, registry: RegistryDep, settings: SettingsDep,
                   request: Request) -> JSONResponse:
     """Steps across models (each names its model), in order; one bad step rejects them all."""
