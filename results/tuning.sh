@@ -6,6 +6,8 @@
 #      (results/tuning/switches/switches.md)
 #   3. DDPG alone and the default again on two more tuning runs, base seed 1
 #      (results/tuning/seed-1/seed-1.md)
+#   4. the revision noise decaying sooner (K = 0.02) and almost at once (K = 1), against the
+#      default and DDPG alone of part 2 (results/tuning/noise/noise.md)
 # Resumable: finished experiments are skipped.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -46,3 +48,11 @@ ddpg;ddpg;{}
 default;ddpg+shield;{}
 JOBS
 .venv/bin/python -m client compare "$out"/{ddpg,default} --out "$out/seed-1.md"
+
+out=results/tuning/noise
+experiments "$out" 250 <<'JOBS'
+noise-k-0.02;ddpg+shield;{"reviser": {"noise_k": 0.02}}
+noise-k-1;ddpg+shield;{"reviser": {"noise_k": 1.0}}
+JOBS
+.venv/bin/python -m client compare results/tuning/switches/{ddpg,default} \
+    "$out"/{noise-k-0.02,noise-k-1} --out "$out/noise.md"
