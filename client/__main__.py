@@ -1,4 +1,4 @@
-"""``python -m client run | report | compare | demo``: car-following experiments."""
+"""``python -m client run | report | compare | trace | demo``: car-following experiments."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ import typer
 from tqdm import tqdm
 
 from app.core import ShieldConfig, ShieldError
-from client.experiment import report, runner
+from client.experiment import report, runner, trace
 from client.experiment.records import RecordError
 from client.shield import ShieldAPIError, ShieldClient, ShieldUnavailable
 
@@ -34,7 +34,7 @@ def fail(message: str) -> NoReturn:
 
 def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, transport: str,
                out: Path, workers: int, token: str | None, lead: str,
-               shield_config: str = "{}", lockstep: bool = False) -> str:
+               shield_config: str = "{}", lockstep: bool = False, trace: bool = False) -> str:
     """Run, then report; every failure a user can cause becomes one line."""
     try:
         overrides = json.loads(shield_config)
@@ -49,7 +49,7 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
                     probe.health()
         total = len(config.arms) * runs * episodes
         with tqdm(total=total, desc="episodes", unit="ep", disable=None) as bar:
-            runner.run_all(config, out, workers, token, bar, lockstep)
+            runner.run_all(config, out, workers, token, bar, lockstep, trace)
         text, _ = report.write(out)
     except ShieldError as error:
         fail(f"shield configuration: {error.field}: {error.message}")
@@ -82,10 +82,13 @@ def run(
     lockstep: Annotated[bool, typer.Option(
         help="Train the runs of each DDPG arm together in one process, one vectorised update "
              "for all (equal to separate runs within rounding).")] = False,
+    trace: Annotated[bool, typer.Option(
+        help="Also write every decision of the shielded runs to OUT/traces (see 'trace').")]
+    = False,
 ) -> None:
     """Run arms x runs x episodes (resumable: run it again to continue), then report."""
     typer.echo(experiment(arms, runs, episodes, seed, shield, transport, out, workers, token,
-                          lead, shield_config, lockstep))
+                          lead, shield_config, lockstep, trace))
     typer.echo(f"\nrecords, summary.json, table.md and figure.png in {out}")
 
 
@@ -117,6 +120,18 @@ def compare_command(
         fail(str(error))
     if out is not None:
         out.write_text(text + "\n")
+    typer.echo(text)
+
+
+@cli.command("trace")
+def trace_command(directory: Path) -> None:
+    """Where the shield revised and whether it saw each failure coming, from the step traces
+    of an experiment run with --trace (also written to DIRECTORY/trace.md)."""
+    try:
+        text = trace.analyse(directory)
+    except RecordError as error:
+        fail(str(error))
+    (directory / "trace.md").write_text(text)
     typer.echo(text)
 
 

@@ -30,6 +30,7 @@ from app.core import ShieldConfig
 from client.agents.idm import PRESETS, RandomController
 from client.experiment import records
 from client.experiment.records import EpisodeRecord, RecordError
+from client.experiment.trace import TraceWriter
 from client.shield import BatchShield, LocalShield, ShieldClient, ShieldSession, StepShield
 from client.shield.remote import step_body
 from client.shield.wrapper import ShieldWrapper
@@ -181,15 +182,19 @@ class EpisodeMeter:
         }
 
 
-def play(env: Any, agent: Controller, obs: Any, learner: Any | None) -> tuple[
+def play(env: Any, agent: Controller, obs: Any, learner: Any | None,
+         trace: Callable[[float, dict[str, Any]], None] | None = None) -> tuple[
         dict[str, Any], Any]:
-    """One episode; returns its measurements and the last observation."""
+    """One episode; returns its measurements and the last observation. ``trace`` sees each
+    step's proposal and info."""
     meter = EpisodeMeter()
     info: dict[str, Any] = {}
     for _ in range(800):
         proposed = agent.act(obs)
         next_obs, reward, terminated, truncated, info = env.step(
             np.array([proposed], np.float32))
+        if trace is not None:
+            trace(proposed, info)
         executed = meter.add(proposed, reward, info)
         if learner is not None:
             learner.remember(obs, executed, reward, next_obs, terminated)
@@ -214,12 +219,14 @@ class Run:
     shield: StepShield | None
     claim: IO[bytes]
     appended: int = 0
+    trace: TraceWriter | None = None
 
     @classmethod
     def open(cls, config: ExperimentConfig, arm: str, index: int, out: Path,
-             token: str | None, wrap: bool = True) -> Run:
+             token: str | None, wrap: bool = True, trace: bool = False) -> Run:
         """Open the run's records and environment; ``wrap=False`` leaves the shield (if any)
-        to the caller instead of putting it in front of the environment."""
+        to the caller instead of putting it in front of the environment; with ``trace`` a
+        shielded run also writes its step trace."""
         seed = run_seeds(config.seed, config.runs)[index]
         path = records.path_for(out, arm, index)
         identity = {k: v for k, v in config.to_dict().items()
@@ -241,7 +248,8 @@ class Run:
         except BaseException:
             claim.close()
             raise
-        return cls(config, arm, index, seed, path, recorded, env, shield, claim)
+        writer = TraceWriter(out, arm, index) if trace and shield is not None else None
+        return cls(config, arm, index, seed, path, recorded, env, shield, claim, trace=writer)
 
     @property
     def complete(self) -> bool:
@@ -263,10 +271,16 @@ class Run:
         if progress is not None:
             progress.put(1)
 
+    def recorder(self, episode: int) -> Callable[[float, dict[str, Any]], None] | None:
+        """The step recorder of ``episode`` when the run is traced."""
+        return None if self.trace is None else self.trace.recorder(episode)
+
     def close(self) -> None:
-        """Release the shield and the run's file."""
+        """Release the shield, the trace and the run's file."""
         if self.shield is not None:
             self.shield.close()
+        if self.trace is not None:
+            self.trace.close()
         self.claim.close()
 
 
@@ -278,10 +292,10 @@ def _torch_for_one_core() -> None:
 
 
 def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str | None = None,
-            progress: Any | None = None) -> int:
+            progress: Any | None = None, trace: bool = False) -> int:
     """Play one run to ``config.episodes``; returns the number of episodes appended."""
     _torch_for_one_core()
-    state = Run.open(config, arm, run, out, token)
+    state = Run.open(config, arm, run, out, token, trace=trace)
     if state.complete:
         state.close()
         return 0
@@ -303,7 +317,7 @@ def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str 
             start = time.perf_counter()
             if learner is not None:
                 learner.noise.reset()
-            measured, obs = play(state.env, agent, obs, learner)
+            measured, obs = play(state.env, agent, obs, learner, state.recorder(episode))
             state.finish(episode, measured, time.perf_counter() - start, progress)
             obs, _ = state.env.reset()
     finally:
@@ -312,7 +326,7 @@ def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str 
 
 
 def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | None = None,
-                 progress: Any | None = None) -> int:
+                 progress: Any | None = None, trace: bool = False) -> int:
     """Every run of a DDPG arm in one process, stepping together: one vectorised DDPG update
     for all runs per step (:class:`~client.agents.ensemble.DDPGEnsemble`), and with the batch
     transport one request per step carrying a step of every run's model. Each run sees the
@@ -327,7 +341,7 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
     _torch_for_one_core()
     runs = []
     for i in range(config.runs):
-        run = Run.open(config, arm, i, out, token, wrap=False)
+        run = Run.open(config, arm, i, out, token, wrap=False, trace=trace)
         if run.complete:
             run.close()
         else:
@@ -360,7 +374,10 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
                 next_obs, reward, terminated, truncated, info = runs[k].env.step(
                     np.array([action], np.float32))
                 if decision is not None:
-                    info["shield"] = decision
+                    info["shield"], info["shield_observation"] = decision, z[k]
+                recorder = runs[k].recorder(episode[k])
+                if recorder is not None:
+                    recorder(proposals[k], info)
                 executed = meters[k].add(proposals[k], reward, info)
                 learner.members[j].remember(obs[k], executed, reward, next_obs, terminated)
                 obs[k], z[k] = next_obs, info["efsm_observation"]
@@ -464,9 +481,10 @@ def _die_with_parent(parent: int) -> None:
 
 
 def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None = None,
-            bar: Any | None = None, lockstep: bool = False) -> int:
+            bar: Any | None = None, lockstep: bool = False, trace: bool = False) -> int:
     """Every (arm, run) in its own process, at most ``workers`` at a time; with ``lockstep``
-    the runs of each DDPG arm share one process and one vectorised update."""
+    the runs of each DDPG arm share one process and one vectorised update; with ``trace``
+    shielded runs write step traces."""
     jobs: list[tuple[Callable[..., int], tuple[Any, ...]]] = []
     for arm in config.arms:
         if lockstep and parse_arm(arm)[0] == "ddpg":
@@ -478,7 +496,8 @@ def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None
             workers, mp_context=context, initializer=_die_with_parent,
             initargs=(os.getpid(),)) as pool:
         progress = manager.Queue()
-        pending: set[Future[int]] = {pool.submit(job, *args, progress) for job, args in jobs}
+        pending: set[Future[int]] = {pool.submit(job, *args, progress, trace)
+                                     for job, args in jobs}
         appended = 0
         while pending:
             finished, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)

@@ -15,7 +15,8 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
 
     The shield observes ``info["efsm_observation"]`` when the environment provides it (else the
     observation itself) and learns the failure named by ``info["event"]`` at the end of an
-    episode. ``info["shield"]`` carries the decision of each step; the action applied is the
+    episode. ``info["shield"]`` carries the decision of each step and
+    ``info["shield_observation"]`` the observation it was made on; the action applied is the
     decision's. With ``shadow`` the shield learns and reports but never changes the action.
     """
 
@@ -34,11 +35,13 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         proposed = float(np.asarray(action).reshape(-1)[0])
-        decision = self.shield.revise(self._z, proposed, stream=self.stream, shadow=self.shadow)
+        z = self._z
+        decision = self.shield.revise(z, proposed, stream=self.stream, shadow=self.shadow)
         applied = np.asarray([decision.action], dtype=np.float32)
         observation, reward, terminated, truncated, info = self.env.step(applied)
         self._z = _efsm(observation, info)
         info["shield"] = decision
+        info["shield_observation"] = z
         if terminated or truncated:
             info["shield_done"] = self.shield.revise(self._z, None, stream=self.stream,
                                                      done=True, event=info.get("event"))

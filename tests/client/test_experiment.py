@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from client.agents.ddpg import DDPG, DDPGConfig
-from client.experiment import records, report, runner
+from client.experiment import records, report, runner, trace
 from client.experiment.records import EpisodeRecord
 from tests.conftest import free_port
 
@@ -284,3 +284,38 @@ def test_the_paper_protocol_script_runs_every_shielded_run_on_its_own_service(
     for offset in (0, 1):
         with pytest.raises(httpx.TransportError):
             httpx.get(f"http://127.0.0.1:{port + offset}/healthz", timeout=1)
+
+
+def test_a_traced_run_keeps_every_decision_once_even_when_resumed(tmp_path: Path) -> None:
+    arm = "idm-aggressive+shield"
+    runner.run_one(CONFIG, arm, 0, tmp_path, trace=True)
+    path = records.path_for(tmp_path, arm, 0)
+    path.write_text("".join(path.read_text().splitlines(keepends=True)[:4]))  # 3 episodes
+    assert runner.run_one(CONFIG, arm, 0, tmp_path, trace=True) == 5  # replays 3, adds 5
+    rows = trace.read(trace.path_for(tmp_path, arm, 0))
+    episodes = records.read(records.path_for(tmp_path, arm, 0))[1]
+    assert len(rows) == sum(e.steps for e in episodes)  # no replayed step twice
+    assert [sum(r["e"] == e.episode for r in rows) for e in episodes] == [
+        e.steps for e in episodes]
+    revised = [r for r in rows if r["r"].startswith("revised")]
+    assert revised and len(revised) == sum(sum(e.interventions.values()) for e in episodes)
+    assert {r["r"] for r in rows if r["e"] <= 2} <= {"inactive", "cold_start"}  # not active yet
+    runner.run_one(CONFIG, "idm-aggressive", 0, tmp_path, trace=True)
+    assert not trace.path_for(tmp_path, "idm-aggressive", 0).exists()  # nothing to trace
+
+
+def test_the_trace_command_tells_where_the_shield_revised(tmp_path: Path) -> None:
+    result = cli("run", "--arms", "ddpg+shield", "--runs", "1", "--episodes", "3",
+                 "--lead", "synthetic", "--out", str(tmp_path), "--trace", "--lockstep",
+                 "--shield-config", '{"reviser": {"activate_after_episodes": 1, '
+                                    '"flag_min_rate": 0.0001}}')
+    assert result.returncode == 0, result.stderr
+    rows = trace.read(trace.path_for(tmp_path, "ddpg+shield", 0))
+    assert len(rows) == sum(e.steps for e in records.read_all(tmp_path)[1])
+    result = cli("trace", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert "## ddpg+shield: 2 episodes with the reviser on (of 3 traced)" in result.stdout
+    assert "| headway (m) | steps | revised against collision |" in result.stdout
+    assert (tmp_path / "trace.md").read_text().strip() == result.stdout.strip()
+    missing = cli("trace", str(tmp_path / "elsewhere"))
+    assert missing.returncode == 2 and len(missing.stderr.strip().splitlines()) == 1

@@ -1,0 +1,161 @@
+"""Step traces of shielded runs, and what they say about the shield (``run --trace``, ``trace``).
+
+The episode records count revisions; a trace keeps every decision with the observation it was
+made on, so that one can ask where the shield revises and whether it saw each failure coming.
+One gzipped JSON Lines file per shielded run, ``traces/<arm>__runNN.jsonl.gz``, written anew
+whenever the run is played (a resumed run replays from its start, so its trace is whole).
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from app.core import Decision
+from client.experiment.records import RecordError, read_all
+
+HEADWAY_BANDS = ((0, 10), (10, 20), (20, 40), (40, 80), (80, 150), (150, None))  # [m]
+LOOKBACK = 10  # steps before a failure that count as "saw it coming" (2.5 s at dt 0.25 s)
+EXAMPLES = 2  # failure episodes shown step by step, per failure kind and arm
+ACTIVE = ("pass", "revised_safety", "revised_speed")  # the reviser was on for this decision
+
+
+def path_for(directory: Path, arm: str, run: int) -> Path:
+    return directory / "traces" / f"{arm.replace('+', '_')}__run{run:02d}.jsonl.gz"
+
+
+class TraceWriter:
+    """Writes one run's decisions as they happen."""
+
+    def __init__(self, directory: Path, arm: str, run: int) -> None:
+        path = path_for(directory, arm, run)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self._file: IO[str] = gzip.open(path, "wt", encoding="utf-8")
+
+    def recorder(self, episode: int) -> Callable[[float, dict[str, Any]], None]:
+        """What :func:`client.experiment.runner.play` calls after each step of ``episode``."""
+
+        def record(proposed: float, info: dict[str, Any]) -> None:
+            decision: Decision | None = info.get("shield")
+            if decision is not None:
+                self.add(episode, info["shield_observation"], proposed, decision)
+
+        return record
+
+    def add(self, episode: int, z: list[float], proposed: float, d: Decision) -> None:
+        row = {"e": episode, "z": [round(v, 2) for v in z], "p": round(proposed, 3),
+               "a": None if d.action is None else round(d.action, 3), "r": d.reason, "v": d.verdict,
+               "risk": {k: round(v, 4) for k, v in d.risk.items()},
+               "t": None if d.threshold is None else round(d.threshold, 4), "s": d.state,
+               "n": d.n_states}
+        self._file.write(json.dumps(row, separators=(",", ":")) + "\n")
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def read(path: Path) -> list[dict[str, Any]]:
+    try:
+        with gzip.open(path, "rt", encoding="utf-8") as handle:
+            return [json.loads(line) for line in handle]
+    except (OSError, EOFError, ValueError) as error:
+        raise RecordError(f"{path}: damaged trace ({error}); run the experiment again") \
+            from error
+
+
+def analyse(directory: Path) -> str:
+    """Markdown: where each arm revises (by headway), whether it revised before each failure,
+    and the last steps of a few failures."""
+    paths = sorted((directory / "traces").glob("*.jsonl.gz"))
+    if not paths:
+        raise RecordError(f"{directory}: no traces; run the experiment with --trace")
+    _, records = read_all(directory)
+    outcomes = {(r.arm, r.run, r.episode): r.outcome for r in records}
+    by_arm: dict[str, list[list[dict[str, Any]]]] = defaultdict(list)
+    for path in paths:
+        arm, run = path.name.removesuffix(".jsonl.gz").rsplit("__run", 1)
+        arm = arm.replace("_", "+")
+        steps_of: dict[int, list[dict[str, Any]]] = defaultdict(list)
+        for row in read(path):
+            steps_of[row["e"]].append(row)
+        for e, steps in sorted(steps_of.items()):
+            outcome = outcomes.get((arm, int(run), e))
+            if outcome is None:
+                raise RecordError(f"{path}: episode {e} has no record")
+            by_arm[arm].append([{**s, "outcome": outcome} for s in steps])
+    parts = []
+    for arm, episodes in by_arm.items():
+        active = [e for e in episodes if e[0]["r"] in ACTIVE]
+        parts.append(f"## {arm}: {len(active)} episodes with the reviser on "
+                     f"(of {len(episodes)} traced)\n")
+        parts.append(_by_headway([s for e in active for s in e]))
+        parts.append(_before_failures(active))
+        parts.append(_examples(active))
+    return "\n".join(parts)
+
+
+def _criteria(steps: list[dict[str, Any]]) -> list[str]:
+    return list(steps[0]["risk"]) if steps else []
+
+
+def _by_headway(steps: list[dict[str, Any]]) -> str:
+    criteria = _criteria(steps)
+    head = "| headway (m) | steps | " + " | ".join(
+        f"revised against {c} | predicted {c} risk p50 / p90" for c in criteria) + " |"
+    lines = [head, "|---|---:|" + "---:|---:|" * len(criteria)]
+    for low, high in HEADWAY_BANDS:
+        band = [s for s in steps if s["z"][1] >= low and (high is None or s["z"][1] < high)]
+        if not band:
+            continue
+        cells = []
+        for c in criteria:
+            revised = sum(s["v"] == c and s["r"].startswith("revised") for s in band)
+            p50, p90 = np.percentile([s["risk"][c] for s in band], [50, 90])
+            cells.append(f"{100 * revised / len(band):.1f}% | {p50:.3f} / {p90:.3f}")
+        label = f"{low}-{high}" if high is not None else f"{low}+"
+        lines.append(f"| {label} | {len(band)} | " + " | ".join(cells) + " |")
+    return "Where the shield revises:\n\n" + "\n".join(lines) + "\n"
+
+
+def _before_failures(episodes: list[list[dict[str, Any]]]) -> str:
+    lines = [f"| failure | episodes | revised against it in the last {LOOKBACK} steps | "
+             f"its predicted risk at or above the threshold there | median of its highest "
+             f"predicted risk there |", "|---|---:|---:|---:|---:|"]
+    for criterion in _criteria([s for e in episodes for s in e]):
+        failed = [e for e in episodes if e[-1]["outcome"] == criterion]
+        if not failed:
+            continue
+        tails = [e[-LOOKBACK:] for e in failed]
+        revised = sum(any(s["v"] == criterion and s["r"].startswith("revised") for s in t)
+                      for t in tails)
+        above = sum(any(s["t"] is not None and s["risk"][criterion] >= s["t"] for s in t)
+                    for t in tails)
+        peak = float(np.median([max(s["risk"][criterion] for s in t) for t in tails]))
+        n = len(failed)
+        lines.append(f"| {criterion} | {n} | {revised} ({100 * revised / n:.0f}%) | "
+                     f"{above} ({100 * above / n:.0f}%) | {peak:.3f} |")
+    return "Before each failure:\n\n" + "\n".join(lines) + "\n"
+
+
+def _examples(episodes: list[list[dict[str, Any]]]) -> str:
+    out = []
+    for criterion in _criteria([s for e in episodes for s in e]):
+        for e in [e for e in episodes if e[-1]["outcome"] == criterion][:EXAMPLES]:
+            out.append(f"The last steps of episode {e[0]['e']} ({criterion}):\n")
+            out.append("| v_ego | headway | v_lead | proposed | applied | decision | "
+                       f"{criterion} risk | threshold | state |")
+            out.append("|---:|---:|---:|---:|---:|---|---:|---:|---:|")
+            for s in e[-LOOKBACK:]:
+                v, h, vl = s["z"]
+                threshold = "-" if s["t"] is None else f"{s['t']:.3f}"
+                out.append(f"| {v:.1f} | {h:.1f} | {vl:.1f} | {s['p']:+.2f} | {s['a']:+.2f} | "
+                           f"{s['r']} | {s['risk'][criterion]:.3f} | {threshold} | "
+                           f"{s['s']} of {s['n']} |")
+            out.append("")
+    return "\n".join(out)
