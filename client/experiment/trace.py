@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import gzip
 import json
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
@@ -23,6 +23,7 @@ from client.experiment.records import RecordError, read_all
 HEADWAY_BANDS = ((0, 10), (10, 20), (20, 40), (40, 80), (80, 150), (150, None))  # [m]
 LOOKBACK = 10  # steps before a failure that count as "saw it coming" (2.5 s at dt 0.25 s)
 EXAMPLES = 2  # failure episodes shown step by step, per failure kind and arm
+REASON_BLOCK = 50  # episodes per row of the table of decisions by reason
 ACTIVE = ("pass", "revised_safety", "revised_speed")  # the reviser was on for this decision
 
 
@@ -94,6 +95,7 @@ def analyse(directory: Path) -> str:
         active = [e for e in episodes if e[0]["r"] in ACTIVE]
         parts.append(f"## {arm}: {len(active)} episodes with the reviser on "
                      f"(of {len(episodes)} traced)\n")
+        parts.append(_reasons(episodes))
         parts.append(_by_headway([s for e in active for s in e]))
         parts.append(_before_failures(active))
         parts.append(_examples(active))
@@ -102,6 +104,21 @@ def analyse(directory: Path) -> str:
 
 def _criteria(steps: list[dict[str, Any]]) -> list[str]:
     return list(steps[0]["risk"]) if steps else []
+
+
+def _reasons(episodes: list[list[dict[str, Any]]]) -> str:
+    """Decisions by reason per block of episodes: when the reviser acts, and when it cannot
+    (``cold_start``: no state flagged)."""
+    blocks: dict[int, Counter[str]] = defaultdict(Counter)
+    for e in episodes:
+        blocks[(e[0]["e"] - 1) // REASON_BLOCK].update(s["r"] for s in e)
+    reasons = sorted({r for c in blocks.values() for r in c})
+    lines = ["| episodes | " + " | ".join(reasons) + " |", "|---|" + "---:|" * len(reasons)]
+    for b, counts in sorted(blocks.items()):
+        label = f"{REASON_BLOCK * b + 1}-{REASON_BLOCK * (b + 1)}"
+        lines.append(f"| {label} | " + " | ".join(str(counts[r]) for r in reasons) + " |")
+    title = "Decisions by reason (all runs; cold_start: no state flagged):"
+    return title + "\n\n" + "\n".join(lines) + "\n"
 
 
 def _by_headway(steps: list[dict[str, Any]]) -> str:

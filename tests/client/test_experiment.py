@@ -316,6 +316,11 @@ def test_the_trace_command_tells_where_the_shield_revised(tmp_path: Path) -> Non
     assert result.returncode == 0, result.stderr
     assert "## ddpg+shield: 2 episodes with the reviser on (of 3 traced)" in result.stdout
     assert "| headway (m) | steps | revised against collision |" in result.stdout
+    by_reason = result.stdout.split("Decisions by reason")[1].split("\n\n")[1].splitlines()
+    header = [c.strip() for c in by_reason[0].strip("|").split("|")]
+    counts = [int(c) for c in by_reason[2].strip("|").split("|")[1:]]
+    assert header[0] == "episodes" and by_reason[2].startswith("| 1-50 |")
+    assert sum(counts) == len(rows)  # every traced decision counted once
     assert (tmp_path / "trace.md").read_text().strip() == result.stdout.strip()
     missing = cli("trace", str(tmp_path / "elsewhere"))
     assert missing.returncode == 2 and len(missing.stderr.strip().splitlines()) == 1
