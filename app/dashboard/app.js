@@ -124,8 +124,15 @@ function drawStates() {
   ctx.clearRect(0, 0, canvas.width, canvas.height);
   if (!view.config) return;
   const [dx, dy] = view.dims, obs = view.config.observation, pad = 30;
-  const sx = (v) => pad + (v - obs.low[dx]) / (obs.high[dx] - obs.low[dx]) * (canvas.width - 2 * pad);
-  const sy = (v) => canvas.height - pad - (v - obs.low[dy]) / (obs.high[dy] - obs.low[dy]) * (canvas.height - 2 * pad);
+  // the axes span the normalisation bounds and every state beyond them (a headway above its
+  // bound normalises above 1 and is still a state)
+  const span = (d) => {
+    const centres = view.states.filter(Boolean).map((s) => s.centre[d]);
+    return [Math.min(obs.low[d], ...centres), Math.max(obs.high[d], ...centres)];
+  };
+  const [x0, x1] = span(dx), [y0, y1] = span(dy);
+  const sx = (v) => pad + (v - x0) / (x1 - x0) * (canvas.width - 2 * pad);
+  const sy = (v) => canvas.height - pad - (v - y0) / (y1 - y0) * (canvas.height - 2 * pad);
   ctx.strokeStyle = "#ccd"; ctx.strokeRect(pad, pad, canvas.width - 2 * pad, canvas.height - 2 * pad);
   ctx.fillStyle = "#555"; ctx.font = "12px sans-serif";
   ctx.fillText(obs.names[dx], canvas.width / 2, canvas.height - 8);
