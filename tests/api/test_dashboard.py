@@ -60,8 +60,9 @@ def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) ->
             n = shield.snapshot(tpm="none", exact=False)["n_states"]
             page.wait_for_function(f"document.getElementById('state-count').textContent == '{n}'",
                                    timeout=5000)
-            # a new state shows within a second of being created
-            decision = shield.revise([31.0, 199.0, 1.0], 0.0, stream="probe")
+            # a new state shows within a second of being created (a headway far beyond
+            # the stream's 0-200 m makes one)
+            decision = shield.revise([31.0, 400.0, 1.0], 0.0, stream="probe")
             assert decision.new_state
             created = time.monotonic()
             page.wait_for_function(
@@ -75,6 +76,9 @@ def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) ->
         assert box is not None
         width, height = page.evaluate(
             "[document.getElementById('states').width, document.getElementById('states').height]")
+        # every state is drawn inside the plot, the probe beyond the headway bound included
+        assert page.evaluate(f"view.positions.every(([i, x, y]) => x >= 0 && x <= {width} "
+                             f"&& y >= 0 && y <= {height})")
         page.locator("#states").click(position={"x": x * box["width"] / width,
                                                 "y": y * box["height"] / height})
         page.wait_for_selector("#next-states")
