@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -118,16 +119,29 @@ def blocks_table(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def labels(directories: list[Path]) -> list[str]:
+    """A row label per experiment: its folder's name, or where names repeat (the same
+    experiment on other seeds) its path below the folders' common parent."""
+    names = [d.name for d in directories]
+    if len(set(names)) == len(names):
+        return names
+    resolved = [d.resolve() for d in directories]
+    if len(set(resolved)) < len(resolved):
+        raise RecordError("an experiment is given twice")
+    common = Path(os.path.commonpath(resolved))
+    return [str(d.relative_to(common)) for d in resolved]
+
+
 def compare(directories: list[Path]) -> str:
     """One table over several experiments (ablations): a row per directory and arm, with the
     shield configuration each was run with."""
     summary: dict[str, Any] = {}
     notes: dict[str, str] = {}
-    for directory in directories:
+    for directory, name in zip(directories, labels(directories), strict=True):
         headers, episodes = read_all(directory)
         overrides = json.dumps(headers[0]["config"]["shield_config"], separators=(",", ":"))
         for arm, row in summarise(episodes).items():
-            label = f"{directory.name}: {arm}"
+            label = f"{name}: {arm}"
             summary[label] = row
             notes[label] = f"`{overrides}`" if "+" in arm else "-"
     return table(summary, notes)

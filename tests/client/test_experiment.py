@@ -324,3 +324,15 @@ def test_the_trace_command_tells_where_the_shield_revised(tmp_path: Path) -> Non
     assert (tmp_path / "trace.md").read_text().strip() == result.stdout.strip()
     missing = cli("trace", str(tmp_path / "elsewhere"))
     assert missing.returncode == 2 and len(missing.stderr.strip().splitlines()) == 1
+
+
+def test_compare_keeps_experiments_of_the_same_name_apart(tmp_path: Path) -> None:
+    short = dataclasses.replace(CONFIG, episodes=2)
+    for seed in (3, 4):
+        runner.run_one(dataclasses.replace(short, seed=seed), "idm-aggressive", 0,
+                       tmp_path / f"seed-{seed}" / "idm")
+    text = report.compare([tmp_path / "seed-3" / "idm", tmp_path / "seed-4" / "idm"])
+    rows = [line.split(" | ")[0] for line in text.splitlines()[2:]]
+    assert rows == ["| seed-3/idm: idm-aggressive", "| seed-4/idm: idm-aggressive"]
+    with pytest.raises(records.RecordError, match="given twice"):
+        report.compare([tmp_path / "seed-3" / "idm", tmp_path / "seed-3" / "idm"])
