@@ -101,7 +101,7 @@ def steps(count: int, seed: int, workload: str) -> list[tuple[list[float], float
     """Observations drifting through the cube (physical units) and the proposals."""
     rng = np.random.default_rng(seed + 1)
     z = rng.uniform(0, 1, 3)
-    high = np.array([32.0, 200.0, 32.0])
+    high = np.array(ShieldConfig().observation.high)  # the cube the model's states fill
     out = []
     for _ in range(count):
         z = np.clip(z + rng.normal(0, 0.03, 3), 0, 1)

@@ -24,8 +24,9 @@ new-state-pad;ddpg+shield;{"transitions": {"on_new_state": "pad"}}
 noise-std;ddpg+shield;{"reviser": {"noise": "std"}}
 no-transpose;ddpg+shield;{"reviser": {"transpose": false}}
 horizon-2;ddpg+shield;{"reviser": {"horizon": 2}}
+headway-50;ddpg+shield;{"observation": {"high": [32.0, 50.0, 32.0]}}
 other-controllers;idm-aggressive,idm-aggressive+shield,random,random+shield;{}
 JOBS
-.venv/bin/python -m client compare "$out"/{ddpg,default,flags-sticky,flags-overwrite,inspect-first-index,new-state-pad,noise-std,no-transpose,horizon-2} \
+.venv/bin/python -m client compare "$out"/{ddpg,default,flags-sticky,flags-overwrite,inspect-first-index,new-state-pad,noise-std,no-transpose,horizon-2,headway-50} \
     --out "$out/ablations.md"
 .venv/bin/python -m client report "$out/other-controllers" >/dev/null

@@ -27,13 +27,17 @@ def _check(ok: bool, field_name: str, message: str) -> None:
 class ObservationSpec:
     """The e-FSM observation z_t (Eq. 12) and the bounds that normalise it.
 
-    [REC] z is scaled to ``(z - low) / (high - low)`` before clustering, so that no dimension
-    dominates the distances (spec §2.4: divide by (32, 200, 32)).
+    z is scaled to ``(z - low) / (high - low)`` before clustering, so that no dimension
+    dominates the distances. The spec's [REC] divides by (32, 200, 32) (§2.4); the default
+    divides the headway by 50 m instead: with 200 m a state spanned tens of metres of headway
+    and the reviser could not tell the seconds before a crash from ordinary following
+    (results/README.md, "The headway scale"; tuned on seeds 0-2). Headways above 50 m simply
+    normalise above 1.
     """
 
     names: tuple[str, ...] = ("v_ego", "headway", "v_lead")
     low: tuple[float, ...] = (0.0, 0.0, 0.0)  # [m/s, m, m/s]
-    high: tuple[float, ...] = (32.0, 200.0, 32.0)  # [m/s, m, m/s]
+    high: tuple[float, ...] = (32.0, 50.0, 32.0)  # [m/s, m, m/s]
 
     def __post_init__(self) -> None:
         _check(len(self.names) >= 1, "names", "at least one observation dimension is needed")

@@ -21,7 +21,7 @@ def episode(c: TestClient, path: str = "/revise", stream: str = "0", n: int = 6,
             crash: bool = True) -> list[dict[str, Any]]:
     out = []
     for t in range(n):
-        body = {"observation": [10.0 + t, 40.0 - 5 * t, 9.0], "action": 0.5, "stream": stream}
+        body = {"observation": [10.0 + t, 12.0 - 2 * t, 9.0], "action": 0.5, "stream": stream}
         out.append(c.post(path, json=body).json())
     end = {"observation": [16.0, 0.0, 9.0], "action": None, "stream": stream, "done": True,
            "event": "collision" if crash else None}

@@ -69,12 +69,13 @@ def test_all_transports_give_identical_decisions_and_episodes(server: Server) ->
 
 def test_the_wrapper_reports_and_applies_the_decision() -> None:
     shield = LocalShield(ShieldConfig.from_dict(CONFIG))
-    records = episodes(shield, count=6)
+    records = episodes(shield, count=10)
     revised = [r[0] for r in records if len(r) == 3 and r[0].revised]
-    assert revised and all(d.action != d.proposed for d in revised)
+    assert revised and all(d.action == d.suggested for d in revised)
+    assert any(d.action != d.proposed for d in revised)  # (a clipped revision may coincide)
     done = [r for r in records if len(r) == 2]
-    assert len(done) == 6 and all(r[0].reason == "done" for r in done)
-    assert shield.shield.counters.episodes == 6
+    assert len(done) == 10 and all(r[0].reason == "done" for r in done)
+    assert shield.shield.counters.episodes == 10
 
 
 @pytest.mark.parametrize("transport", ["http", "ws", "batch"])
