@@ -4,7 +4,10 @@
 # a shield service of its own over WebSocket (a sidecar per controller, in-memory models); all
 # 20 runs train in parallel processes, so it wants 16 cores or more.
 #
-#   results/paper-protocol.sh [OUT]          (default OUT: results/paper-protocol)
+#   results/paper-protocol.sh [OUT]          (default OUT: results/paper-protocol-50m)
+#
+# results/paper-protocol holds the partial run made when the default normalised the headway by
+# 200 m; to continue that one, check out commit 1f428c5 and pass it as OUT.
 #
 # RUNS and EPISODES override the sizes, PORT the first of the services' ports (8300); PYTHON
 # names an interpreter that already has the project's packages (otherwise .venv is made as
@@ -12,7 +15,7 @@
 # appended per episode).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-out=${1:-results/paper-protocol}
+out=${1:-results/paper-protocol-50m}
 runs=${RUNS:-10}
 episodes=${EPISODES:-1500}
 first_port=${PORT:-8300}
