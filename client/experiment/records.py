@@ -64,7 +64,9 @@ def start(path: Path, header: dict[str, Any]) -> list[EpisodeRecord]:
     """Open a run's file: create it with the header, or read the episodes it already holds.
 
     An existing file must carry the same ``identity`` (the configuration less where the
-    shield runs and how it is reached, which change no result) else :class:`RecordError`.
+    shield runs and how it is reached, which change no result) and, where both headers have
+    it, the same resolved shield configuration (the overrides alone do not show a change of
+    the defaults), else :class:`RecordError`.
     """
     if not path.exists() or path.stat().st_size == 0:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -78,6 +80,10 @@ def start(path: Path, header: dict[str, Any]) -> list[EpisodeRecord]:
     existing_header, records = read(path)
     if existing_header.get("identity") != header.get("identity"):
         raise RecordError(f"{path}: written with another configuration; use another --out")
+    before, now = existing_header.get("shield"), header.get("shield")
+    if before is not None and now is not None and before != now:
+        raise RecordError(f"{path}: written with another shield configuration (the defaults "
+                          f"have changed since); remove it or use another --out")
     return records
 
 

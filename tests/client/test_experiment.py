@@ -52,6 +52,20 @@ def test_records_from_another_configuration_are_refused(tmp_path: Path) -> None:
         runner.run_one(other, "idm-aggressive", 0, tmp_path)
 
 
+def test_records_made_under_other_shield_defaults_are_refused(tmp_path: Path) -> None:
+    """The same overrides under changed defaults are another experiment: the header's
+    resolved shield configuration tells them apart."""
+    arm = "idm-aggressive+shield"
+    runner.run_one(CONFIG, arm, 0, tmp_path)
+    path = records.path_for(tmp_path, arm, 0)
+    lines = path.read_text().splitlines(keepends=True)
+    header = json.loads(lines[0])
+    header["header"]["shield"]["observation"]["high"] = [32.0, 200.0, 32.0]  # older defaults
+    path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
+    with pytest.raises(records.RecordError, match="another shield configuration"):
+        runner.run_one(CONFIG, arm, 0, tmp_path)
+
+
 def record(run: int, episode: int, outcome: str, n: int = 10, mean: float = 1.0,
            var: float = 0.0) -> EpisodeRecord:
     return EpisodeRecord(arm="a", run=run, episode=episode, seed=run, steps=n, outcome=outcome,
