@@ -89,7 +89,7 @@ def analyse(directory: Path) -> str:
             outcome = outcomes.get((arm, int(run), e))
             if outcome is None:
                 raise RecordError(f"{path}: episode {e} has no record")
-            by_arm[arm].append([{**s, "outcome": outcome} for s in steps])
+            by_arm[arm].append([{**s, "outcome": outcome, "run": int(run)} for s in steps])
     parts = []
     for arm, episodes in by_arm.items():
         active = [e for e in episodes if e[0]["r"] in ACTIVE]
@@ -98,6 +98,7 @@ def analyse(directory: Path) -> str:
         parts.append(_reasons(episodes))
         parts.append(_by_headway([s for e in active for s in e]))
         parts.append(_before_failures(active))
+        parts.append(_failure_states(episodes))
         parts.append(_examples(active))
     return "\n".join(parts)
 
@@ -158,6 +159,28 @@ def _before_failures(episodes: list[list[dict[str, Any]]]) -> str:
         lines.append(f"| {criterion} | {n} | {revised} ({100 * revised / n:.0f}%) | "
                      f"{above} ({100 * above / n:.0f}%) | {peak:.3f} |")
     return "Before each failure:\n\n" + "\n".join(lines) + "\n"
+
+
+def _failure_states(episodes: list[list[dict[str, Any]]]) -> str:
+    """Per run, the states the failures came from (the state of each failed episode's last
+    decision) against how often each was recognised: a state whose failures are a small share
+    of its recognitions is not flagged by count-based flags."""
+    criteria = _criteria([s for e in episodes for s in e])
+    recognised: Counter[tuple[int, int]] = Counter(
+        (s["run"], s["s"]) for e in episodes for s in e)
+    failures: dict[tuple[int, int], Counter[str]] = defaultdict(Counter)
+    for e in episodes:
+        if e[-1]["outcome"] in criteria:
+            failures[(e[-1]["run"], e[-1]["s"])][e[-1]["outcome"]] += 1
+    head = "| run | state | decisions in it | " + " | ".join(criteria) + " | revised in the run |"
+    lines = [head, "|---:|---:|---:|" + "---:|" * len(criteria) + "---:|"]
+    revised = Counter(s["run"] for e in episodes for s in e if s["r"].startswith("revised"))
+    for run, state in sorted(failures):
+        counts = failures[(run, state)]
+        lines.append(f"| {run} | {state} | {recognised[(run, state)]} | "
+                     + " | ".join(str(counts[c]) for c in criteria) + f" | {revised[run]} |")
+    return "Where the failures came from (the state of each failed episode's last decision):\n\n" \
+        + "\n".join(lines) + "\n"
 
 
 def _examples(episodes: list[list[dict[str, Any]]]) -> str:
