@@ -70,7 +70,9 @@ def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) ->
                 timeout=1000)
             assert time.monotonic() - created < 1.0
 
-        # a click on a state shows its transitions under every action
+        # a click on a state shows its transitions under every action (once the plot holds
+        # every state: the probe widened its axes)
+        page.wait_for_function(f"view.positions.length == {decision.n_states}", timeout=5000)
         index, x, y = page.evaluate("view.positions[0]")
         box = page.locator("#states").bounding_box()
         assert box is not None
