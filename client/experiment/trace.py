@@ -71,8 +71,9 @@ def read(path: Path) -> list[dict[str, Any]]:
 
 
 def analyse(directory: Path) -> str:
-    """Markdown: where each arm revises (by headway), whether it revised before each failure,
-    and the last steps of a few failures."""
+    """Markdown, per arm: decisions by reason over the episodes, where the shield revises (by
+    headway), whether it revised before each failure, which states the failures came from, and
+    the last steps of a few failures."""
     paths = sorted((directory / "traces").glob("*.jsonl.gz"))
     if not paths:
         raise RecordError(f"{directory}: no traces; run the experiment with --trace")

@@ -342,6 +342,11 @@ def test_the_trace_command_tells_where_the_shield_revised(tmp_path: Path) -> Non
     assert (tmp_path / "trace.md").read_text().strip() == result.stdout.strip()
     missing = cli("trace", str(tmp_path / "elsewhere"))
     assert missing.returncode == 2 and len(missing.stderr.strip().splitlines()) == 1
+    path = trace.path_for(tmp_path, "ddpg+shield", 0)
+    path.write_bytes(path.read_bytes()[:-20])  # a trace cut short
+    damaged = cli("trace", str(tmp_path))
+    assert damaged.returncode == 2 and "damaged trace" in damaged.stderr
+    assert len(damaged.stderr.strip().splitlines()) == 1
 
 
 def test_compare_keeps_experiments_of_the_same_name_apart(tmp_path: Path) -> None:
