@@ -19,8 +19,9 @@ import typer
 from tqdm import tqdm
 
 from app.core import ShieldConfig, ShieldError
-from client.experiment import report, runner, trace
+from client.experiment import report, runner
 from client.experiment.records import RecordError
+from client.experiment.trace import analyse as analyse_traces
 from client.shield import ShieldAPIError, ShieldClient, ShieldUnavailable
 
 cli = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -128,7 +129,7 @@ def trace_command(directory: Path) -> None:
     """Where the shield revised and whether it saw each failure coming, from the step traces
     of an experiment run with --trace (also written to DIRECTORY/trace.md)."""
     try:
-        text = trace.analyse(directory)
+        text = analyse_traces(directory)
     except RecordError as error:
         fail(str(error))
     (directory / "trace.md").write_text(text)
