@@ -2,7 +2,7 @@
 # Tuning of the headway scale (base seeds 0-2, never the evaluation seeds), in-process shields,
 # 2 runs x 250 episodes per row: the headway normalised by 100, 50 and 25 m on seed 0, by 200 m
 # and 50 m on seeds 1 and 2 where no 200 m row of results/tuning.sh exists, and 50 m with the
-# revision noise almost gone (K = 1) on all three; and 50 m with sticky flags on seeds 0 and 1,
+# revision noise almost gone (K = 1) on all three; and 50 m with sticky flags on all three,
 # after the trace of seed 1 showed count-based flags leaving a busy crash state unflagged. One table, results/tuning/scale/scale.md, beside the
 # 200 m rows and DDPG alone of results/tuning.sh. Resumable: finished experiments are skipped.
 set -euo pipefail
@@ -37,9 +37,11 @@ ddpg;ddpg;{}
 headway-200;ddpg+shield;$h200
 headway-50;ddpg+shield;$h50
 headway-50-noise-k-1;ddpg+shield;$h50k1
+headway-50-sticky;ddpg+shield;$h50sticky
 JOBS
 .venv/bin/python -m client compare results/tuning/switches/{ddpg,default} \
     "$out"/{headway-100,headway-50,headway-25,headway-50-noise-k-1,headway-50-sticky} \
     results/tuning/seed-1/{ddpg,default} \
     "$out"/seed-1/{headway-50,headway-50-noise-k-1,headway-50-sticky} \
-    "$out"/seed-2/{ddpg,headway-200,headway-50,headway-50-noise-k-1} --out "$out/scale.md"
+    "$out"/seed-2/{ddpg,headway-200,headway-50,headway-50-noise-k-1,headway-50-sticky} \
+    --out "$out/scale.md"
