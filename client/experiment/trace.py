@@ -96,16 +96,13 @@ def analyse(directory: Path) -> str:
         active = [e for e in episodes if e[0]["r"] in ACTIVE]
         parts.append(f"## {arm}: {len(active)} episodes with the reviser on "
                      f"(of {len(episodes)} traced)\n")
+        criteria = list(episodes[0][0]["risk"])  # every decision names every criterion
         parts.append(_reasons(episodes))
-        parts.append(_by_headway([s for e in active for s in e]))
-        parts.append(_before_failures(active))
-        parts.append(_failure_states(episodes))
-        parts.append(_examples(active))
+        parts.append(_by_headway([s for e in active for s in e], criteria))
+        parts.append(_before_failures(active, criteria))
+        parts.append(_failure_states(episodes, criteria))
+        parts.append(_examples(active, criteria))
     return "\n".join(parts)
-
-
-def _criteria(steps: list[dict[str, Any]]) -> list[str]:
-    return list(steps[0]["risk"]) if steps else []
 
 
 def _reasons(episodes: list[list[dict[str, Any]]]) -> str:
@@ -123,8 +120,7 @@ def _reasons(episodes: list[list[dict[str, Any]]]) -> str:
     return title + "\n\n" + "\n".join(lines) + "\n"
 
 
-def _by_headway(steps: list[dict[str, Any]]) -> str:
-    criteria = _criteria(steps)
+def _by_headway(steps: list[dict[str, Any]], criteria: list[str]) -> str:
     head = "| headway (m) | steps | " + " | ".join(
         f"revised against {c} | predicted {c} risk p50 / p90" for c in criteria) + " |"
     lines = [head, "|---|---:|" + "---:|---:|" * len(criteria)]
@@ -142,11 +138,11 @@ def _by_headway(steps: list[dict[str, Any]]) -> str:
     return "Where the shield revises:\n\n" + "\n".join(lines) + "\n"
 
 
-def _before_failures(episodes: list[list[dict[str, Any]]]) -> str:
+def _before_failures(episodes: list[list[dict[str, Any]]], criteria: list[str]) -> str:
     lines = [f"| failure | episodes | revised against it in the last {LOOKBACK} steps | "
              f"its predicted risk at or above the threshold there | median of its highest "
              f"predicted risk there |", "|---|---:|---:|---:|---:|"]
-    for criterion in _criteria([s for e in episodes for s in e]):
+    for criterion in criteria:
         failed = [e for e in episodes if e[-1]["outcome"] == criterion]
         if not failed:
             continue
@@ -162,11 +158,10 @@ def _before_failures(episodes: list[list[dict[str, Any]]]) -> str:
     return "Before each failure:\n\n" + "\n".join(lines) + "\n"
 
 
-def _failure_states(episodes: list[list[dict[str, Any]]]) -> str:
+def _failure_states(episodes: list[list[dict[str, Any]]], criteria: list[str]) -> str:
     """Per run, the states the failures came from (the state of each failed episode's last
     decision) against how often each was recognised: a state whose failures are a small share
     of its recognitions is not flagged by count-based flags."""
-    criteria = _criteria([s for e in episodes for s in e])
     recognised: Counter[tuple[int, int]] = Counter(
         (s["run"], s["s"]) for e in episodes for s in e)
     failures: dict[tuple[int, int], Counter[str]] = defaultdict(Counter)
@@ -184,9 +179,9 @@ def _failure_states(episodes: list[list[dict[str, Any]]]) -> str:
         + "\n".join(lines) + "\n"
 
 
-def _examples(episodes: list[list[dict[str, Any]]]) -> str:
+def _examples(episodes: list[list[dict[str, Any]]], criteria: list[str]) -> str:
     out = []
-    for criterion in _criteria([s for e in episodes for s in e]):
+    for criterion in criteria:
         for e in [e for e in episodes if e[-1]["outcome"] == criterion][:EXAMPLES]:
             out.append(f"The last steps of episode {e[0]['e']} ({criterion}):\n")
             out.append("| v_ego | headway | v_lead | proposed | applied | decision | "
