@@ -53,7 +53,7 @@ class BearerToken(HTTPBearer):
 require_token = BearerToken(auto_error=False, description="Required when the server has a token.")
 # Routes on the per-step path call check_token themselves (a FastAPI dependency costs about
 # 25 us a request) and document the scheme with this
-BEARER_DOCUMENTED: dict[str, Any] = {"security": [{"BearerToken": []}]}
+BEARER_DOCUMENTED: dict[str, Any] = {"security": [{require_token.scheme_name: []}]}
 
 RegistryDep = Annotated[ModelRegistry, Depends(get_registry)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
