@@ -35,7 +35,8 @@ def fail(message: str) -> NoReturn:
 
 def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, transport: str,
                out: Path, workers: int, token: str | None, lead: str,
-               shield_config: str = "{}", lockstep: bool = False, trace: bool = False) -> str:
+               shield_config: str = "{}", lockstep: int = 0, trace: bool = False,
+               device: str = "cpu") -> str:
     """Run, then report; every failure a user can cause becomes one line."""
     try:
         overrides = json.loads(shield_config)
@@ -50,7 +51,7 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
                     probe.health()
         total = len(config.arms) * runs * episodes
         with tqdm(total=total, desc="episodes", unit="ep", disable=None) as bar:
-            runner.run_all(config, out, workers, token, bar, lockstep, trace)
+            runner.run_all(config, out, workers, token, bar, lockstep, trace, device)
         text, _ = report.write(out)
     except ShieldError as error:
         fail(f"shield configuration: {error.field}: {error.message}")
@@ -81,15 +82,31 @@ def run(
         help='Overrides of the shield configuration as JSON, e.g. '
              '\'{"reviser": {"inspect": "first_index"}}\' (ablations).')] = "{}",
     lockstep: Annotated[bool, typer.Option(
-        help="Train the runs of each DDPG arm together in one process, one vectorised update "
+        help="Train the runs of each DDPG arm together in one process, one batched update "
              "for all (equal to separate runs within rounding).")] = False,
+    lockstep_runs: Annotated[int | None, typer.Option(
+        min=1, help="With --lockstep: runs per process (default: all the runs of an arm).")]
+    = None,
+    device: Annotated[str, typer.Option(
+        help="With --lockstep: where the batched updates run, cpu or cuda (a CUDA graph).")]
+    = "cpu",
     trace: Annotated[bool, typer.Option(
         help="Also write every decision of the shielded runs to OUT/traces (see 'trace').")]
     = False,
 ) -> None:
     """Run arms x runs x episodes (resumable: run it again to continue), then report."""
+    if not lockstep and (lockstep_runs is not None or device != "cpu"):
+        fail("--lockstep-runs and --device are options of --lockstep")
+    if device not in ("cpu", "cuda"):
+        fail(f"--device: cpu or cuda, not {device!r}")
+    if device == "cuda":
+        import torch
+
+        if not torch.cuda.is_available():
+            fail("--device cuda: no CUDA device here")
+    group = (lockstep_runs or runs) if lockstep else 0
     typer.echo(experiment(arms, runs, episodes, seed, shield, transport, out, workers, token,
-                          lead, shield_config, lockstep, trace))
+                          lead, shield_config, group, trace, device))
     typer.echo(f"\nrecords, summary.json, table.md and figure.png in {out}")
 
 

@@ -71,6 +71,14 @@ class ReplayBuffer:
         return ReplaySample(*(torch.from_numpy(x[index]) for x in
                               (self.obs, self.action, self.reward, self.next_obs, self.done)))
 
+    def sample_into(self, rows: npt.NDArray[np.float32]) -> None:
+        """Draw ``len(rows)`` transitions as :meth:`sample` would (the same generator draws),
+        written side by side into ``rows``: obs, action, reward, next obs, terminal."""
+        index = self.rng.integers(0, min(self.count, self.size), len(rows))
+        rows[:, 0:4], rows[:, 4:5], rows[:, 5:6] = self.obs[index], self.action[index], \
+            self.reward[index]
+        rows[:, 6:10], rows[:, 10:11] = self.next_obs[index], self.done[index]
+
 
 class OrnsteinUhlenbeckNoise:
     """Temporally correlated exploration noise, from its own generator."""

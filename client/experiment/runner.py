@@ -17,9 +17,10 @@ import signal
 import sys
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import IO, Any, Literal, Protocol
 
@@ -223,10 +224,12 @@ class Run:
 
     @classmethod
     def open(cls, config: ExperimentConfig, arm: str, index: int, out: Path,
-             token: str | None, wrap: bool = True, trace: bool = False) -> Run:
+             token: str | None, wrap: bool = True, trace: bool = False,
+             learning: dict[str, Any] | None = None) -> Run:
         """Open the run's records and environment; ``wrap=False`` leaves the shield (if any)
         to the caller instead of putting it in front of the environment; with ``trace`` a
-        shielded run also writes its step trace."""
+        shielded run also writes its step trace. ``learning`` says how the learner ran
+        (lockstep, device) for the header: it rounds differently, changes no configuration."""
         seed = run_seeds(config.seed, config.runs)[index]
         path = records.path_for(out, arm, index)
         identity = {k: v for k, v in config.to_dict().items()
@@ -234,7 +237,8 @@ class Run:
         _, mode = parse_arm(arm)
         header = {"config": config.to_dict(), "identity": identity, "arm": arm, "run": index,
                   "seed": seed, "versions": versions(),
-                  "shield": shield_config(config, seed).to_dict() if mode else None}
+                  "shield": shield_config(config, seed).to_dict() if mode else None,
+                  "learning": learning or {"lockstep": False, "device": "cpu"}}
         claim = records.claim(path)
         try:  # a refused file or an unreachable shield releases the run's file at once
             recorded = records.start(path, header)
@@ -326,22 +330,27 @@ def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str 
 
 
 def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | None = None,
-                 progress: Any | None = None, trace: bool = False) -> int:
-    """Every run of a DDPG arm in one process, stepping together: one vectorised DDPG update
-    for all runs per step (:class:`~client.agents.ensemble.DDPGEnsemble`), and with the batch
-    transport one request per step carrying a step of every run's model. Each run sees the
-    same sequence as :func:`run_one` (act, shield, step, remember, update); results agree
-    within the rounding of batched arithmetic."""
+                 progress: Any | None = None, trace: bool = False,
+                 indices: Sequence[int] | None = None, device: str = "cpu") -> int:
+    """The runs of a DDPG arm (all, or those ``indices``) in one process, stepping together: one
+    batched DDPG update for all runs per step (:class:`~client.agents.ensemble.DDPGEnsemble`,
+    on ``device``), and one round of shield requests per step: with the batch transport one
+    request carrying a step of every run's model, over WebSocket every run's step sent before
+    any reply is read. Each run sees the same sequence as :func:`run_one` (act, shield, step,
+    remember, update); results agree within the rounding of batched arithmetic."""
     from client.agents.ddpg import DDPGConfig
     from client.agents.ensemble import DDPGEnsemble
 
     controller, mode = parse_arm(arm)
     if controller != "ddpg":
         raise ValueError(f"lockstep training is for DDPG arms, not {arm!r}")
+    if device.startswith("cuda"):  # cuBLAS is deterministic only with a fixed workspace
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
     _torch_for_one_core()
+    learning = {"lockstep": True, "device": device}
     runs = []
-    for i in range(config.runs):
-        run = Run.open(config, arm, i, out, token, wrap=False, trace=trace)
+    for i in range(config.runs) if indices is None else indices:
+        run = Run.open(config, arm, i, out, token, wrap=False, trace=trace, learning=learning)
         if run.complete:
             run.close()
         else:
@@ -349,7 +358,7 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
     if not runs:
         return 0
     shield = Lockstep(runs, config, arm, shadow=mode == "shadow") if mode else None
-    learner = DDPGEnsemble(DDPGConfig(**config.ddpg), [r.seed for r in runs])
+    learner = DDPGEnsemble(DDPGConfig(**config.ddpg), [r.seed for r in runs], device)
     obs, z = [], []
     for r in runs:
         first, info = r.env.reset(seed=r.seed)
@@ -422,9 +431,10 @@ def _finisher(run: Run, episode: int, meter: EpisodeMeter, info: dict[str, Any],
 
 
 class Lockstep:
-    """The shields of lockstep runs: over the batch transport to one service, one request per
-    round with the pending episode ends first, then a step of every active run (each model sees
-    its steps in order); otherwise each run's own shield, in the same order."""
+    """The shields of lockstep runs, one round per step: the pending episode ends first, then a
+    step of every active run (each model sees its steps in order). Over the batch transport to
+    one service the round is one request; over WebSocket every run's frame is sent before any
+    reply is read; otherwise each run's own shield is asked in turn."""
 
     def __init__(self, runs: list[Run], config: ExperimentConfig, arm: str,
                  shadow: bool) -> None:
@@ -461,6 +471,10 @@ class Lockstep:
     def _send(self, requests: list[tuple[int, dict[str, Any]]]) -> list[Any]:
         if self.batch is not None:
             return self.batch.revise_many([(self.names[k], body) for k, body in requests])
+        sessions = [self.runs[k].shield for k, _ in requests]
+        if all(isinstance(s, ShieldSession) for s in sessions):
+            return ShieldSession.revise_across(
+                [(s, body) for s, (_, body) in zip(sessions, requests, strict=True)])  # type: ignore[misc]
         out = []
         for k, body in requests:
             shield = self.runs[k].shield
@@ -481,14 +495,20 @@ def _die_with_parent(parent: int) -> None:
 
 
 def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None = None,
-            bar: Any | None = None, lockstep: bool = False, trace: bool = False) -> int:
-    """Every (arm, run) in its own process, at most ``workers`` at a time; with ``lockstep``
-    the runs of each DDPG arm share one process and one vectorised update; with ``trace``
-    shielded runs write step traces."""
+            bar: Any | None = None, lockstep: int = 0, trace: bool = False,
+            device: str = "cpu") -> int:
+    """Every (arm, run) in its own process, at most ``workers`` at a time. With ``lockstep``
+    N > 0 the runs of each DDPG arm go N to a process, each group with one batched update on
+    ``device``; with ``trace`` shielded runs write step traces."""
+    if device != "cpu" and not lockstep:
+        raise ValueError(f"learning on {device!r} is for lockstep runs (--lockstep)")
     jobs: list[tuple[Callable[..., int], tuple[Any, ...]]] = []
     for arm in config.arms:
         if lockstep and parse_arm(arm)[0] == "ddpg":
-            jobs.append((run_lockstep, (config, arm, out, token)))
+            for first in range(0, config.runs, lockstep):
+                group = list(range(first, min(first + lockstep, config.runs)))
+                jobs.append((partial(run_lockstep, indices=group, device=device),
+                             (config, arm, out, token)))
         else:
             jobs.extend((run_one, (config, arm, run, out, token)) for run in range(config.runs))
     context = multiprocessing.get_context("spawn")

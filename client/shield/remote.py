@@ -281,6 +281,16 @@ class ShieldSession:
         replies = [self._receive() for _ in steps]
         return [self._decision(r) for r in replies]
 
+    @staticmethod
+    def revise_across(steps: Sequence[tuple[ShieldSession, Mapping[str, Any]]]) -> list[Decision]:
+        """``(session, step body)`` pairs: every step is sent before any reply is read, so
+        services behind different sessions work at the same time (lockstep runs with a sidecar
+        each); replies come back in order, errors after all are read."""
+        for session, step in steps:
+            session._send(json.dumps(step))
+        replies = [session._receive() for session, _ in steps]
+        return [ShieldSession._decision(r) for r in replies]
+
     def close(self) -> None:
         self._ws.close()
 

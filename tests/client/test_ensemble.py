@@ -18,10 +18,17 @@ from client.experiment import records, runner
 ACTION_TOLERANCE = 1e-4
 
 
-def test_ensemble_members_learn_like_separate_runs() -> None:
+DEVICES = ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
+    not torch.cuda.is_available(), reason="no CUDA device here"))]
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_ensemble_members_learn_like_separate_runs(device: str) -> None:
+    """On CUDA the update is a captured graph after a few eager ones: the replays must go on
+    learning exactly what the separate runs learn."""
     torch.set_num_threads(1)
     config, seeds = DDPGConfig(warmup=64), [11, 12, 13]
-    ensemble, single = DDPGEnsemble(config, seeds), [DDPG(config, s) for s in seeds]
+    ensemble, single = DDPGEnsemble(config, seeds, device), [DDPG(config, s) for s in seeds]
     rng = np.random.default_rng(0)
     obs = rng.uniform(0, 30, (3, 4)).astype(np.float32)
     for _ in range(300):
@@ -37,6 +44,8 @@ def test_ensemble_members_learn_like_separate_runs() -> None:
         for agent in single:
             agent.update()
         obs = following
+    if device == "cuda":
+        assert ensemble._graph is not None  # the replays were tested, not eager updates
     greedy = ensemble.act(obs, explore=False)
     np.testing.assert_allclose(greedy, [a.act(o, explore=False) for a, o in
                                         zip(single, obs, strict=True)], atol=ACTION_TOLERANCE)
@@ -100,10 +109,11 @@ def test_lockstep_over_the_batch_route_equals_lockstep_in_process(tmp_path: Path
         server.stop()
 
 
-def test_dropping_members_leaves_the_others_learning_as_before() -> None:
+@pytest.mark.parametrize("device", DEVICES)
+def test_dropping_members_leaves_the_others_learning_as_before(device: str) -> None:
     torch.set_num_threads(1)
     config = DDPGConfig(warmup=64)
-    full, cut = DDPGEnsemble(config, [1, 2, 3]), DDPGEnsemble(config, [1, 2, 3])
+    full, cut = DDPGEnsemble(config, [1, 2, 3], device), DDPGEnsemble(config, [1, 2, 3], device)
     rng = np.random.default_rng(0)
     obs = rng.uniform(0, 30, (3, 4)).astype(np.float32)
     for t in range(200):
@@ -122,3 +132,44 @@ def test_dropping_members_leaves_the_others_learning_as_before() -> None:
         cut.update()
         obs = following
     assert len(cut.members) == 2 and cut.actor_opt.state  # the Adam moments came along
+
+
+def test_lockstep_over_websocket_equals_lockstep_in_process(tmp_path: Path) -> None:
+    """Every run's frame of a round is sent before any reply is read; each model still sees
+    its own steps in order, so the records are those of the in-process shields."""
+    from tests.conftest import start_server
+
+    server = start_server(tmp_path / "data", "--fsync", "never")
+    try:
+        remote = dataclasses.replace(CONFIG, shield=server.url, transport="ws")
+        local_dir, remote_dir = tmp_path / "local", tmp_path / "remote"
+        runner.run_lockstep(CONFIG, "ddpg+shield", local_dir)
+        runner.run_lockstep(remote, "ddpg+shield", remote_dir)
+        for run in range(CONFIG.runs):
+            a = [dataclasses.replace(r, wall_s=0.0) for r in episodes(local_dir, run)]
+            b = [dataclasses.replace(r, wall_s=0.0) for r in episodes(remote_dir, run)]
+            assert a == b
+        assert any(r.interventions for r in episodes(remote_dir, 0))  # the shield acted
+    finally:
+        server.stop()
+
+
+def test_lockstep_groups_record_every_run_and_how_it_learned(tmp_path: Path) -> None:
+    """Three runs two to a process: every run is recorded, the groups' runs start as they do
+    in one group of three, and each header says the learner ran in lockstep on the CPU."""
+    whole, grouped = tmp_path / "whole", tmp_path / "grouped"
+    runner.run_lockstep(CONFIG, "ddpg+shield", whole)
+    assert runner.run_all(CONFIG, grouped, workers=2, lockstep=2) == CONFIG.runs * CONFIG.episodes
+    before = CONFIG.shield_config["reviser"]["activate_after_episodes"]
+    for run in range(CONFIG.runs):
+        a, b = episodes(whole, run), episodes(grouped, run)
+        assert [(r.steps, r.outcome) for r in a[:before]] == \
+            [(r.steps, r.outcome) for r in b[:before]]
+        assert len(b) == CONFIG.episodes
+        header, _ = records.read(records.path_for(grouped, "ddpg+shield", run))
+        assert header["learning"] == {"lockstep": True, "device": "cpu"}
+
+
+def test_learning_on_a_device_is_for_lockstep_runs(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="lockstep"):
+        runner.run_all(CONFIG, tmp_path, workers=1, device="cuda")

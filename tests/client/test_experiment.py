@@ -195,10 +195,23 @@ def test_run_command_end_to_end(tmp_path: Path) -> None:
 
 
 def test_lockstep_command(tmp_path: Path) -> None:
-    result = cli("run", "--arms", "ddpg,idm", "--runs", "2", "--episodes", "2", "--lockstep",
-                 "--lead", "synthetic", "--workers", "2", "--out", str(tmp_path))
+    result = cli("run", "--arms", "ddpg,idm", "--runs", "3", "--episodes", "2", "--lockstep",
+                 "--lockstep-runs", "2", "--lead", "synthetic", "--workers", "2",
+                 "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
-    assert "| ddpg | 2 | 4 |" in result.stdout and "| idm | 2 | 4 |" in result.stdout
+    assert "| ddpg | 3 | 6 |" in result.stdout and "| idm | 3 | 6 |" in result.stdout
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    (["--lockstep-runs", "2"], "options of --lockstep"),
+    (["--device", "cuda"], "options of --lockstep"),
+    (["--lockstep", "--device", "tpu"], "cpu or cuda"),
+])
+def test_lockstep_options_are_checked(tmp_path: Path, options: list[str], message: str) -> None:
+    result = cli("run", "--arms", "ddpg", "--runs", "1", "--episodes", "1", "--lead",
+                 "synthetic", "--out", str(tmp_path), *options)
+    assert result.returncode == 2 and message in result.stderr
+    assert not (tmp_path / "records").exists()
 
 
 def test_compare_puts_experiments_side_by_side(tmp_path: Path) -> None:
