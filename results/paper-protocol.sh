@@ -9,14 +9,19 @@
 # results/paper-protocol holds the partial run made when the default normalised the headway by
 # 200 m; to continue that one, check out commit 1f428c5 and pass it as OUT.
 #
-# DEVICE=cuda trains the DDPG learners in lockstep groups of GROUP runs (default 5), each group's
-# update a CUDA graph on the GPU (client/agents/ensemble.py), the group's shield requests sent
-# together; without it every run trains in its own process on the CPU.
+# How the runs learn, and how they reach the shield:
 #
-# RUNS and EPISODES override the sizes, PORT the first of the services' ports (8300); PYTHON
-# names an interpreter that already has the project's packages (otherwise .venv is made as
-# scripts/test makes it). Resumable: run it again with the same OUT to continue (records are
-# appended per episode).
+#   (nothing)       every run in its own process on the CPU, every shielded run asking a
+#                   service of its own over WebSocket (a sidecar per controller): 16 cores or more
+#   LOCKSTEP=1      the runs of an arm train in lockstep groups (client/agents/ensemble.py):
+#                   GROUP runs per shielded group (default 5), DDPG_GROUP per group of DDPG
+#                   alone (default GROUP); DEVICE=cuda puts the groups' updates on the GPU
+#   TRANSPORT=batch one service for all shielded runs, each lockstep group's round of steps one
+#                   request of the batch route (default ws: a service per run, as above)
+#
+# The two arms run as two `client run` commands side by side, so their groups can differ: on
+# 2 cores, LOCKSTEP=1 GROUP=5 DDPG_GROUP=10 TRANSPORT=batch keeps both cores busy while a
+# shielded group waits for its answers.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-results/paper-protocol-50m}
@@ -29,32 +34,47 @@ if [ -z "${PYTHON:-}" ]; then
     source scripts/_venv.sh
     PYTHON=.venv/bin/python
 fi
+lockstep=${LOCKSTEP:-}
+device=${DEVICE:-cpu}
+group=${GROUP:-5}
+ddpg_group=${DDPG_GROUP:-$group}
+transport=${TRANSPORT:-ws}
+case "$transport" in
+    ws) services=$runs ;;
+    batch) services=1 ;;
+    *) echo "TRANSPORT: ws or batch, not $transport" >&2; exit 2 ;;
+esac
 mkdir -p "$out/services"
 
-services=()
-trap 'kill "${services[@]}" 2>/dev/null || true; wait' EXIT  # and wait: no service outlives the run
+pids=()
+trap 'kill "${pids[@]}" 2>/dev/null || true; wait' EXIT  # and wait: no service outlives the run
 urls=()
-for ((i = 0; i < runs; i++)); do
+for ((i = 0; i < services; i++)); do
     port=$((first_port + i))
     "$PYTHON" -m app serve --host 127.0.0.1 --port "$port" >"$out/services/shield-$i.log" 2>&1 &
-    services+=($!)
+    pids+=($!)
     urls+=("http://127.0.0.1:$port")
 done
-for ((i = 0; i < runs; i++)); do
+for ((i = 0; i < services; i++)); do
     until EFSM_PORT=$((first_port + i)) "$PYTHON" -m app.healthcheck; do
-        kill -0 "${services[i]}" 2>/dev/null ||
+        kill -0 "${pids[i]}" 2>/dev/null ||
             { echo "shield service $i did not start; see $out/services/shield-$i.log" >&2; exit 1; }
         sleep 0.2
     done
 done
 
-if [ -n "$device" ]; then
-    groups=$(((runs + group - 1) / group))
-    learning=(--lockstep --lockstep-runs "$group" --device "$device" --workers $((2 * groups)))
-    how="lockstep groups of $group runs learning on $device, $((2 * groups)) worker processes"
+# arm_options ARM GROUP: the learning options of one arm's command
+arm_options() {
+    if [ -n "$lockstep" ]; then
+        echo "--lockstep --lockstep-runs $2 --device $device --workers $(((runs + $2 - 1) / $2))"
+    else
+        echo "--workers $runs"
+    fi
+}
+if [ -n "$lockstep" ]; then
+    how="lockstep on $device: ddpg in groups of $ddpg_group runs, ddpg+shield in groups of $group"
 else
-    learning=(--workers $((2 * runs)))
-    how="every run in its own process on the CPU, $((2 * runs)) worker processes"
+    how="every run in its own process on the CPU"
 fi
 {
     echo "started: $(date -u +%FT%TZ)"
@@ -62,10 +82,19 @@ fi
     if [ "$device" = cuda ]; then
         echo "gpu: $(nvidia-smi --query-gpu=name --format=csv,noheader | head -1)"
     fi
-    echo "runs: $runs x $episodes episodes per arm; $how"
+    echo "runs: $runs x $episodes episodes per arm; $how; $services shield service(s), $transport"
 } >"$out/machine.txt"
 start=$(date +%s)
-"$PYTHON" -m client run --arms ddpg,ddpg+shield --runs "$runs" --episodes "$episodes" \
-    --seed 1000 --shield "$(IFS=,; echo "${urls[*]}")" --transport ws "${learning[@]}" \
-    --out "$out"
+arms=()
+for arm in ddpg ddpg+shield; do
+    [ "$arm" = ddpg ] && size=$ddpg_group || size=$group
+    # shellcheck disable=SC2046  # the options are words
+    "$PYTHON" -m client run --arms "$arm" --runs "$runs" --episodes "$episodes" --seed 1000 \
+        --shield "$(IFS=,; echo "${urls[*]}")" --transport "$transport" \
+        $(arm_options "$arm" "$size") --out "$out" &
+    arms+=($!)
+done
+status=0
+for pid in "${arms[@]}"; do wait "$pid" || status=1; done
 echo "wall: $(($(date +%s) - start)) s" >>"$out/machine.txt"
+exit $status
