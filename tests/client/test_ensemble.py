@@ -89,14 +89,18 @@ def test_lockstep_is_for_ddpg_arms(tmp_path: Path) -> None:
         runner.run_lockstep(dataclasses.replace(CONFIG, arms=("idm",)), "idm", tmp_path)
 
 
-def test_lockstep_over_the_batch_route_equals_lockstep_in_process(tmp_path: Path) -> None:
-    """One request per lockstep step carries a step of every run's model; the learner's
-    arithmetic is the same as in-process, so the records are identical."""
+@pytest.mark.parametrize("transport", ["batch", "ws"])
+def test_lockstep_against_a_service_equals_lockstep_in_process(tmp_path: Path,
+                                                               transport: str) -> None:
+    """One round per lockstep step (over the batch route one request carrying a step of every
+    run's model; over WebSocket every run's frame sent before any reply is read): each model
+    still sees its own steps in order and the learner's arithmetic is the in-process one, so
+    the records are identical."""
     from tests.conftest import start_server
 
     server = start_server(tmp_path / "data", "--fsync", "never")
     try:
-        remote = dataclasses.replace(CONFIG, shield=server.url, transport="batch")
+        remote = dataclasses.replace(CONFIG, shield=server.url, transport=transport)
         local_dir, remote_dir = tmp_path / "local", tmp_path / "remote"
         runner.run_lockstep(CONFIG, "ddpg+shield", local_dir)
         runner.run_lockstep(remote, "ddpg+shield", remote_dir)
@@ -104,7 +108,7 @@ def test_lockstep_over_the_batch_route_equals_lockstep_in_process(tmp_path: Path
             a = [dataclasses.replace(r, wall_s=0.0) for r in episodes(local_dir, run)]
             b = [dataclasses.replace(r, wall_s=0.0) for r in episodes(remote_dir, run)]
             assert a == b
-        assert any(r.interventions for r in episodes(local_dir, 0))  # the shield acted
+        assert any(r.interventions for r in episodes(remote_dir, 0))  # the shield acted
     finally:
         server.stop()
 
@@ -132,26 +136,6 @@ def test_dropping_members_leaves_the_others_learning_as_before(device: str) -> N
         cut.update()
         obs = following
     assert len(cut.members) == 2 and cut.actor_opt.state  # the Adam moments came along
-
-
-def test_lockstep_over_websocket_equals_lockstep_in_process(tmp_path: Path) -> None:
-    """Every run's frame of a round is sent before any reply is read; each model still sees
-    its own steps in order, so the records are those of the in-process shields."""
-    from tests.conftest import start_server
-
-    server = start_server(tmp_path / "data", "--fsync", "never")
-    try:
-        remote = dataclasses.replace(CONFIG, shield=server.url, transport="ws")
-        local_dir, remote_dir = tmp_path / "local", tmp_path / "remote"
-        runner.run_lockstep(CONFIG, "ddpg+shield", local_dir)
-        runner.run_lockstep(remote, "ddpg+shield", remote_dir)
-        for run in range(CONFIG.runs):
-            a = [dataclasses.replace(r, wall_s=0.0) for r in episodes(local_dir, run)]
-            b = [dataclasses.replace(r, wall_s=0.0) for r in episodes(remote_dir, run)]
-            assert a == b
-        assert any(r.interventions for r in episodes(remote_dir, 0))  # the shield acted
-    finally:
-        server.stop()
 
 
 def test_lockstep_groups_record_every_run_and_how_it_learned(tmp_path: Path) -> None:
