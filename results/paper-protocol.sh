@@ -16,8 +16,10 @@
 #   LOCKSTEP=1      the runs of an arm train in lockstep groups (client/agents/ensemble.py):
 #                   GROUP runs per shielded group (default 5), DDPG_GROUP per group of DDPG
 #                   alone (default GROUP); DEVICE=cuda puts the groups' updates on the GPU
-#   TRANSPORT=batch one service for all shielded runs, each lockstep group's round of steps one
-#                   request of the batch route (default ws: a service per run, as above)
+#   TRANSPORT=batch SERVICES services (default 1) for the shielded runs, run i on service
+#                   i mod SERVICES; a lockstep group's round of steps is one request of the
+#                   batch route per service, all in flight at once (default ws: a service
+#                   per run, as above)
 #
 # The two arms run as two `client run` commands side by side, so their groups can differ. On
 # 2 cores, LOCKSTEP=1 GROUP=10 TRANSPORT=batch: two shielded groups of 5 overlap one group's
@@ -44,7 +46,7 @@ ddpg_group=${DDPG_GROUP:-$group}
 transport=${TRANSPORT:-ws}
 case "$transport" in
     ws) services=$runs ;;
-    batch) services=1 ;;
+    batch) services=${SERVICES:-1} ;;
     *) echo "TRANSPORT: ws or batch, not $transport" >&2; exit 2 ;;
 esac
 mkdir -p "$out/services"

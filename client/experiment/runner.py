@@ -18,7 +18,13 @@ import sys
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import (
+    FIRST_COMPLETED,
+    Future,
+    ProcessPoolExecutor,
+    ThreadPoolExecutor,
+    wait,
+)
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -432,18 +438,25 @@ def _finisher(run: Run, episode: int, meter: EpisodeMeter, info: dict[str, Any],
 
 class Lockstep:
     """The shields of lockstep runs, one round per step: the pending episode ends first, then a
-    step of every active run (each model sees its steps in order). Over the batch transport to
-    one service the round is one request; over WebSocket every run's frame is sent before any
-    reply is read; otherwise each run's own shield is asked in turn."""
+    step of every active run (each model sees its steps in order). Over the batch transport
+    the round is one request per service, all in flight at once; over WebSocket every run's
+    frame is sent before any reply is read; otherwise each run's own shield is asked in
+    turn."""
 
     def __init__(self, runs: list[Run], config: ExperimentConfig, arm: str,
                  shadow: bool) -> None:
         self.runs = runs
         self.shadow = shadow
         self.names = [model_name(config, arm, r.index) for r in runs]
-        first = runs[0].shield
-        one_service = len(set(config.shield_urls)) == 1
-        self.batch = first if isinstance(first, BatchShield) and one_service else None
+        # the batch transport: run k's requests go to service_of[k] with the shield of the
+        # first run there (one request per service and round)
+        batch = [r.shield for r in runs if isinstance(r.shield, BatchShield)]
+        self.service_of = [config.shield_url(r.index) for r in runs] \
+            if len(batch) == len(runs) else []
+        self.carriers: dict[str, BatchShield] = {}
+        for url, shield in zip(self.service_of, batch, strict=False):
+            self.carriers.setdefault(url, shield)
+        self.pool = ThreadPoolExecutor(len(self.carriers)) if len(self.carriers) > 1 else None
         self.closing: list[tuple[int, dict[str, Any], Callable[[Any], None]]] = []
 
     def close_episode(self, k: int, z: Any, event: str | None,
@@ -464,13 +477,16 @@ class Lockstep:
         return answered
 
     def flush(self) -> None:
-        """Send the episode ends still queued when the runs are over."""
+        """Send the episode ends still queued when the runs are over, and let the threads of
+        the batch requests go."""
         if self.closing:
             self.decide([], [], [])
+        if self.pool is not None:
+            self.pool.shutdown()
 
     def _send(self, requests: list[tuple[int, dict[str, Any]]]) -> list[Any]:
-        if self.batch is not None:
-            return self.batch.revise_many([(self.names[k], body) for k, body in requests])
+        if self.carriers:
+            return self._send_batches(requests)
         sessions = [self.runs[k].shield for k, _ in requests]
         if all(isinstance(s, ShieldSession) for s in sessions):
             return ShieldSession.revise_across(
@@ -482,6 +498,19 @@ class Lockstep:
             options = {key: v for key, v in body.items() if key not in ("observation", "action")}
             out.append(shield.revise(body["observation"], body["action"], **options))
         return out
+
+    def _send_batches(self, requests: list[tuple[int, dict[str, Any]]]) -> list[Any]:
+        """One batch request per service; the decisions back in the order of ``requests``."""
+        rounds: dict[str, list[tuple[str, dict[str, Any]]]] = {}
+        for k, body in requests:
+            rounds.setdefault(self.service_of[k], []).append((self.names[k], body))
+        if self.pool is None:
+            answers = [self.carriers[url].revise_many(steps) for url, steps in rounds.items()]
+        else:
+            answers = BatchShield.revise_across(
+                [(self.carriers[url], steps) for url, steps in rounds.items()], self.pool)
+        decisions = {url: iter(a) for url, a in zip(rounds, answers, strict=True)}
+        return [next(decisions[self.service_of[k]]) for k, _ in requests]
 
 
 def _die_with_parent(parent: int) -> None:

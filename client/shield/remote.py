@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor, wait
 from http import HTTPStatus
 from typing import Any
 
@@ -216,6 +217,16 @@ class BatchShield:
     def revise_many(self, steps: Sequence[tuple[str, dict[str, Any]]]) -> list[Decision]:
         """``(model, step body)`` pairs, applied in order in one request."""
         return self._client.revise_batch([{**body, "model": model} for model, body in steps])
+
+    @staticmethod
+    def revise_across(rounds: Sequence[tuple[BatchShield, Sequence[tuple[str, dict[str, Any]]]]],
+                      pool: ThreadPoolExecutor) -> list[list[Decision]]:
+        """One :meth:`revise_many` request per shield (each on a service of its own), all in
+        flight at once on ``pool``'s threads, so the services work at the same time; the
+        answers in the order of ``rounds``, the first error raised after all have come back."""
+        futures = [pool.submit(shield.revise_many, steps) for shield, steps in rounds]
+        wait(futures)
+        return [f.result() for f in futures]
 
     def close(self) -> None:
         self._client.close()

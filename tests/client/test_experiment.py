@@ -313,30 +313,33 @@ def test_the_paper_protocol_script_runs_every_shielded_run_on_its_own_service(
             httpx.get(f"http://127.0.0.1:{port + offset}/healthz", timeout=1)
 
 
-def test_the_paper_protocol_script_trains_in_lockstep_groups_against_one_batch_service(
+def test_the_paper_protocol_script_trains_in_lockstep_groups_against_batch_services(
         tmp_path: Path) -> None:
-    """LOCKSTEP=1 TRANSPORT=batch: one service holds every shielded run's model, the arms
-    train in lockstep groups of their own sizes, and machine.txt says so."""
+    """LOCKSTEP=1 TRANSPORT=batch SERVICES=2: the shielded runs' models spread over two
+    services, the arms train in lockstep groups of their own sizes, and machine.txt says so."""
     root = Path(__file__).resolve().parents[2]
     port = free_port()
     env = {**os.environ, "RUNS": "3", "EPISODES": "2", "PORT": str(port),
            "PYTHON": sys.executable, "LOCKSTEP": "1", "GROUP": "2", "DDPG_GROUP": "3",
-           "TRANSPORT": "batch"}
+           "TRANSPORT": "batch", "SERVICES": "2"}
     result = subprocess.run(["bash", str(root / "results/paper-protocol.sh"), str(tmp_path)],
                             env=env, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     headers, episodes = records.read_all(tmp_path)
-    assert {h["config"]["shield"] for h in headers} == {f"http://127.0.0.1:{port}"}
+    assert {h["config"]["shield"] for h in headers} == {
+        f"http://127.0.0.1:{port},http://127.0.0.1:{port + 1}"}
     assert {h["config"]["transport"] for h in headers} == {"batch"}
     assert all(h["learning"] == {"lockstep": True, "device": "cpu"} for h in headers)
     assert len(episodes) == 2 * 3 * 2
-    log = (tmp_path / "services" / "shield-0.log").read_text()
-    assert "POST /revise/batch" in log and "/ws" not in log
+    for service in (0, 1):
+        log = (tmp_path / "services" / f"shield-{service}.log").read_text()
+        assert "POST /revise/batch" in log and "/ws" not in log
     machine = (tmp_path / "machine.txt").read_text()
     assert "ddpg in groups of 3 runs, ddpg+shield in groups of 2" in machine
-    assert "1 shield service(s), batch" in machine and "wall:" in machine
-    with pytest.raises(httpx.TransportError):
-        httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=1)
+    assert "2 shield service(s), batch" in machine and "wall:" in machine
+    for offset in (0, 1):
+        with pytest.raises(httpx.TransportError):
+            httpx.get(f"http://127.0.0.1:{port + offset}/healthz", timeout=1)
 
 
 def test_the_paper_protocol_script_refuses_an_unknown_transport(tmp_path: Path) -> None:

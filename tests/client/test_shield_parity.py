@@ -145,26 +145,43 @@ def test_a_local_shield_is_not_mixed_with_urls() -> None:
         runner.ExperimentConfig(shield="local,http://127.0.0.1:8000")
 
 
-def test_lockstep_over_the_batch_route_with_a_service_per_run(
+def test_lockstep_over_the_batch_route_across_services(
     server: Server, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
-    """Lockstep runs on several services step each model on its own service (one batch
-    request per round would reach only the first) and record every episode."""
+    """Lockstep runs spread over two services: each round is one batch request per service,
+    both in flight at once; every model lives on its own service only, and the records are
+    those of lockstep with in-process shields."""
+    import dataclasses
+
     from client.experiment import records, runner
 
     sidecar = start_server(tmp_path_factory.mktemp("lockstep") / "data", "--fsync", "never")
     try:
         config = runner.ExperimentConfig(
-            arms=("ddpg+shield",), runs=2, episodes=2, seed=23, lead="synthetic",
-            shield=f"{server.url},{sidecar.url}", transport="batch",
+            arms=("ddpg+shield",), runs=3, episodes=2, seed=23, lead="synthetic",
             shield_config={"reviser": {"activate_after_episodes": 1}},
             model_prefix="lockstep-sidecar")
-        out = tmp_path_factory.mktemp("lockstep-out")
-        assert runner.run_lockstep(config, config.arms[0], out) == 4
-        for run, url in enumerate((server.url, sidecar.url)):
-            assert len(records.read(records.path_for(out, config.arms[0], run))[1]) == 2
+        remote = dataclasses.replace(config, shield=f"{server.url},{sidecar.url}",
+                                     transport="batch")
+        local_dir = tmp_path_factory.mktemp("lockstep-local")
+        remote_dir = tmp_path_factory.mktemp("lockstep-remote")
+        runner.run_lockstep(config, config.arms[0], local_dir)
+        assert runner.run_lockstep(remote, config.arms[0], remote_dir) == 6
+        for url, mine in ((server.url, (0, 2)), (sidecar.url, (1,))):
             with ShieldClient(url) as admin:
-                model = admin.snapshot(runner.model_name(config, config.arms[0], run), tpm="none")
-            assert model["episodes"] == 2
+                held = {m["name"] for m in admin.models()}
+                for run in range(3):
+                    name = runner.model_name(config, config.arms[0], run)
+                    assert (name in held) == (run in mine)
+                    if run in mine:
+                        assert admin.snapshot(name, tpm="none")["episodes"] == 2
     finally:
         sidecar.stop()
+    for run in range(3):
+        local, remote_records = (
+            [dataclasses.replace(r, wall_s=0.0)
+             for r in records.read(records.path_for(d, config.arms[0], run))[1]]
+            for d in (local_dir, remote_dir))
+        assert local == remote_records
+    assert any(r.interventions for r in records.read(
+        records.path_for(remote_dir, config.arms[0], 0))[1])  # the shield acted
