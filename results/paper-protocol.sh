@@ -68,10 +68,10 @@ for ((i = 0; i < services; i++)); do
     done
 done
 
-# arm_options ARM GROUP: the learning options of one arm's command
+# arm_options GROUP: the learning options of an arm's command, its lockstep groups GROUP runs
 arm_options() {
     if [ -n "$lockstep" ]; then
-        echo "--lockstep --lockstep-runs $2 --device $device --workers $(((runs + $2 - 1) / $2))"
+        echo "--lockstep --lockstep-runs $1 --device $device --workers $(((runs + $1 - 1) / $1))"
     else
         echo "--workers $runs"
     fi
@@ -96,8 +96,9 @@ for arm in ddpg ddpg+shield; do
     # shellcheck disable=SC2046  # the options are words
     "$PYTHON" -m client run --arms "$arm" --runs "$runs" --episodes "$episodes" --seed 1000 \
         --shield "$(IFS=,; echo "${urls[*]}")" --transport "$transport" \
-        $(arm_options "$arm" "$size") --out "$out" &
+        $(arm_options "$size") --out "$out" &
     arms+=($!)
+    pids+=($!)  # stopping the script stops the arms too
 done
 status=0
 for pid in "${arms[@]}"; do wait "$pid" || status=1; done
