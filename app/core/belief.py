@@ -27,7 +27,14 @@ class Belief:
 
     def argmax(self) -> int:
         """The recognised state: the most likely one, the lowest index among ties."""
-        return int(self.index[int(np.argmax(self.prob))])
+        return int(self.index[int(self.prob.argmax())])
+
+    def segments(self, n_states: int) -> IndexArray:
+        """How many of the n states lie before the first belief state, between each pair of
+        them (the upper one included) and after the last: the runs of columns j that share
+        the same belief states i < j."""
+        edges = np.concatenate(([0], self.index + 1, [n_states]))
+        return edges[1:] - edges[:-1]
 
     def dense(self, n_states: int) -> FloatArray:
         """The belief as a length-n vector."""
@@ -67,4 +74,4 @@ def recognise(sq_distances: FloatArray, variances: FloatArray, k: int) -> Belief
     weights = np.exp(chosen - chosen.max())
     keep = weights > 0.0
     weights = weights[keep]
-    return Belief(index[keep].astype(np.int64), weights / weights.sum())
+    return Belief(index[keep].astype(np.int64, copy=False), weights / weights.sum())

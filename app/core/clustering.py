@@ -131,7 +131,7 @@ class EvolvingClusterer:
         # §2.2.2: P_k(c_i) = (k-1) P_{k-1}(c_i) / (k-2 + P_{k-1}(c_i) (1 + d_i^2))
         pot = self._potentials[:n]
         pot[:] = (k - 1) * pot / (k - 2 + pot * (1.0 + d2))
-        nearest = int(np.argmin(d2))
+        nearest = int(d2.argmin())
         delta = float(np.sqrt(d2[nearest]))
         p_max = float(pot.max())
 

@@ -48,6 +48,13 @@ class LazyTransitions:
         self._offset = np.zeros((q, 0))  # learned row i is exp(offset) * vals
         self._row_sum = np.zeros((q, 0))  # sum of vals per row
         self._nnz = np.zeros((q, 0), dtype=np.int64)
+        # Per row, kept so that neither learning nor prediction recomputes the row normaliser
+        # F_o of every belief state: log of the padding mass / D_a and of the padding level;
+        # then P^a(i, .) = learned_scale(i) * vals(i) + pad_scale(i) * padding(i)
+        self._log_pad = np.zeros((q, 0))
+        self._log_level = np.zeros((q, 0))
+        self._learned_scale = np.zeros((q, 0))
+        self._pad_scale = np.zeros((q, 0))
         self._cols: list[ColArray] = [np.zeros((0, 0), dtype=np.int32) for _ in range(q)]
         self._vals: list[FloatArray] = [np.zeros((0, 0)) for _ in range(q)]
         self._log_prior = math.log(config.prior)
@@ -67,22 +74,45 @@ class LazyTransitions:
         self._offset = ensure_capacity(self._offset, n + 1, limit, axis=1)
         self._row_sum = ensure_capacity(self._row_sum, n + 1, limit, axis=1)
         self._nnz = ensure_capacity(self._nnz, n + 1, limit, axis=1)
+        for name in ("_log_pad", "_log_level", "_learned_scale", "_pad_scale"):
+            setattr(self, name, ensure_capacity(getattr(self, name), n + 1, limit, axis=1))
         for a in range(self.n_actions):
             self._cols[a] = ensure_capacity(self._cols[a], n + 1, limit)
             self._vals[a] = ensure_capacity(self._vals[a], n + 1, limit)
         self._created[:, n] = -self._log_decay
         self._offset[:, n] = -self._log_decay
         self._n = n + 1
-        self._refresh_pads()
+        self._refresh()
 
-    def _refresh_pads(self) -> None:
-        if self.config.expansion != "prior" or self._n == 0:
-            return
+    def _refresh(self) -> None:
+        """Recompute what depends on the state count: the padding and every row's scales."""
         n = self._n
+        if n == 0:
+            return
         created = self._created[:, :n]
-        self._pad[:, :n] = np.exp(created - created[:, n - 1 : n])
-        self._pad_tail[:, :n] = np.cumsum(self._pad[:, n - 1 :: -1], axis=1)[:, ::-1]
-        self._pad_tail[:, n] = 0.0
+        mode = self.config.expansion
+        if mode == "prior":
+            self._pad[:, :n] = np.exp(created - created[:, n - 1 : n])
+            self._pad_tail[:, :n] = np.cumsum(self._pad[:, n - 1 :: -1], axis=1)[:, ::-1]
+            self._pad_tail[:, n] = 0.0
+            level = self._log_prior + created[:, n - 1 : n]
+            pad_mass = self._pad[:, :n] * np.arange(1, n + 1) + self._pad_tail[:, 1 : n + 1]
+            self._log_level[:, :n] = level
+            self._log_pad[:, :n] = level + np.log(pad_mass)
+        else:
+            self._log_level[:, :n] = self._log_prior + created
+            self._log_pad[:, :n] = self._log_level[:, :n]
+            if mode == "zero_uniform":
+                self._log_pad[:, :n] += np.log(np.arange(1.0, n + 1))
+        with np.errstate(divide="ignore"):  # a row never learned has no learned mass
+            self._refresh_scales(np.s_[:, :n])
+
+    def _refresh_scales(self, at: Any) -> None:
+        """Row i of P^a is ``learned_scale(i) * vals(i) + pad_scale(i) * padding(i)``."""
+        offset = self._offset[at]
+        log_norm = np.logaddexp(self._log_pad[at], offset + np.log(self._row_sum[at]))
+        self._learned_scale[at] = np.exp(offset - log_norm)
+        self._pad_scale[at] = np.exp(self._log_level[at] - log_norm)
 
     def learn_one(self, prev: Belief, action_bin: int, belief: Belief) -> None:
         """Eqs. 3-4 with tau = prev, gamma = belief, for the matrix of ``action_bin``.
@@ -91,37 +121,49 @@ class LazyTransitions:
         ``S += phi tau gamma^T / D``; touched rows are first re-based to the new scale.
         """
         a, lr = action_bin, self.config.learning_rate
-        self._log_decay[a] += math.log1p(-lr)
+        log_decay = self._log_decay[a] + math.log1p(-lr)
+        self._log_decay[a] = log_decay
+        offset, row_sum, nnz_a = self._offset[a], self._row_sum[a], self._nnz[a]
         rows, tau = prev.index, prev.prob
         cols, gamma = belief.index, belief.prob
-        factor = np.exp(self._offset[a, rows] + self._log_decay[a])  # <= 1
-        self._offset[a, rows] = -self._log_decay[a]
-        self._row_sum[a, rows] = self._row_sum[a, rows] * factor + lr * tau * gamma.sum()
+        factor = np.exp(offset[rows] + log_decay)  # <= 1
+        base = -log_decay  # the touched rows' new offset
+        offset[rows] = base
+        learned = row_sum[rows] * factor + lr * tau * gamma.sum()
+        row_sum[rows] = learned
         contrib = lr * tau[:, None] * gamma[None, :]
 
-        nnz = self._nnz[a, rows]
+        # the rows' new normalisers (see _refresh_scales)
+        log_norm = np.logaddexp(self._log_pad[a, rows], base + np.log(learned))
+        self._learned_scale[a, rows] = np.exp(base - log_norm)
+        self._pad_scale[a, rows] = np.exp(self._log_level[a, rows] - log_norm)
+
+        nnz = nnz_a[rows]
         width = self._vals[a].shape[1]
         if width:
-            self._vals[a][rows] *= factor[:, None]
+            vals = self._vals[a]
+            vals[rows] *= factor[:, None]
             slot = self._find_slots(a, rows, nnz, cols)
-            found = slot >= 0
-            fr, fc = np.nonzero(found)
-            self._vals[a][rows[fr], slot[fr, fc]] += contrib[fr, fc]
+            missing = slot < 0
+            if not missing.any():  # the common case once the model has settled
+                vals[rows[:, None], slot] += contrib
+                return
+            fr, fc = (~missing).nonzero()
+            vals[rows[fr], slot[fr, fc]] += contrib[fr, fc]
         else:
-            found = np.zeros((rows.size, cols.size), dtype=bool)
+            missing = np.ones((rows.size, cols.size), dtype=bool)
 
-        missing = ~found
         added = missing.sum(axis=1)
         needed = int((nnz + added).max(initial=0))
         if needed > width:
             new_width = max(needed, width + width // 4, 8)  # rows widen slowly: grow by 25%
             self._cols[a] = ensure_capacity(self._cols[a], new_width, new_width, axis=1)
             self._vals[a] = ensure_capacity(self._vals[a], new_width, new_width, axis=1)
-        mr, mc = np.nonzero(missing)
-        slot_new = nnz[mr] + (np.cumsum(missing, axis=1) - 1)[mr, mc]
+        mr, mc = missing.nonzero()
+        slot_new = nnz[mr] + (missing.cumsum(axis=1) - 1)[mr, mc]
         self._cols[a][rows[mr], slot_new] = cols[mc]
         self._vals[a][rows[mr], slot_new] = contrib[mr, mc]
-        self._nnz[a, rows] = nnz + added
+        nnz_a[rows] = nnz + added
 
     def _find_slots(self, a: int, rows: IntArray, nnz: IntArray, cols: IntArray) -> IntArray:
         """Slot of each (row, col) pair in the learned rows, -1 where absent.
@@ -129,31 +171,17 @@ class LazyTransitions:
         A sparse accumulator: a scratch map column -> slot + 1 is filled for the touched rows
         only and cleared again, so the lookup costs O(k W + k^2) whatever n is.
         """
-        self._scratch = ensure_capacity(self._scratch, rows.size, rows.size)
-        self._scratch = ensure_capacity(self._scratch, self._n, self.max_states, axis=1)
-        width = self._cols[a].shape[1]
-        r, s = np.nonzero(np.arange(width)[None, :] < nnz[:, None])
-        stored = self._cols[a][rows[r], s]
-        self._scratch[r, stored] = s + 1
-        slot = self._scratch[: rows.size][:, cols] - 1
-        self._scratch[r, stored] = 0
+        scratch = self._scratch
+        if scratch.shape[0] < rows.size or scratch.shape[1] < self._n:
+            scratch = ensure_capacity(scratch, rows.size, rows.size)
+            scratch = self._scratch = ensure_capacity(scratch, self._n, self.max_states, axis=1)
+        stored_cols = self._cols[a]
+        r, s = (np.arange(stored_cols.shape[1]) < nnz[:, None]).nonzero()
+        stored = stored_cols[rows[r], s]
+        scratch[r, stored] = s + 1
+        slot = scratch[: rows.size][:, cols] - 1
+        scratch[r, stored] = 0
         return slot
-
-    def _log_norm(self, a: int, rows: IntArray) -> FloatArray:
-        """``log(F_o^a(i) / D_a)`` for the given rows: padding mass (+) learned mass."""
-        mode = self.config.expansion
-        if mode == "prior":
-            n = self._n
-            pad_mass = self._pad[a, rows] * (rows + 1) + self._pad_tail[a, rows + 1]
-            log_pad = self._log_prior + self._created[a, n - 1] + np.log(pad_mass)
-        elif mode == "zero_uniform":
-            log_pad = self._log_prior + self._created[a, rows] + np.log(rows + 1.0)
-        else:
-            log_pad = self._log_prior + self._created[a, rows]
-        with np.errstate(divide="ignore"):
-            log_learned = self._offset[a, rows] + np.log(self._row_sum[a, rows])
-        log_norm: FloatArray = np.logaddexp(log_pad, log_learned)
-        return log_norm
 
     def predict(self, belief: Belief, action_bin: int, transpose: bool) -> FloatArray:
         """Eq. 5: ``P^T p`` when ``transpose`` ([REC], A1), else the literal ``P p``."""
@@ -163,48 +191,41 @@ class LazyTransitions:
 
     def _predict_transposed(self, belief: Belief, a: int) -> FloatArray:
         n, rows, p = self._n, belief.index, belief.prob
-        log_norm = self._log_norm(a, rows)
-        learned = p * np.exp(self._offset[a, rows] - log_norm)
+        learned = p * self._learned_scale[a, rows]
         vals = self._vals[a][rows] * learned[:, None]
         if vals.size:  # weighted bincount is float64 already: asarray does not copy
             cols = self._cols[a][rows].ravel()
             pred = np.asarray(np.bincount(cols, weights=vals.ravel(), minlength=n), np.float64)
         else:
             pred = np.zeros(n)
-        # columns j fall into k + 1 segments by how many belief rows lie below them
-        edges = np.concatenate(([0], rows + 1, [n]))
-        segment = edges[1:] - edges[:-1]
+        c = p * self._pad_scale[a, rows]
         mode = self.config.expansion
         if mode == "prior":
             # sum_i c_i pad(max(i, j)) = pad(j) sum_{i<j} c_i + sum_{i>=j} c_i pad(i)
-            c = p * np.exp(self._log_prior + self._created[a, n - 1] - log_norm)
-            below = np.concatenate(([0.0], np.cumsum(c)))
-            weighted = np.concatenate((np.cumsum((c * self._pad[a, rows])[::-1])[::-1], [0.0]))
-            pred += self._pad[a, :n] * np.repeat(below, segment) + np.repeat(weighted, segment)
+            below = np.zeros(rows.size + 1)
+            c.cumsum(out=below[1:])
+            weighted = _suffix_sums(c * self._pad[a, rows])
+            segment = belief.segments(n)
+            pred += self._pad[a, :n] * below.repeat(segment) + weighted.repeat(segment)
+        elif mode == "zero_uniform":  # row i spreads over columns j <= i
+            pred += _suffix_sums(c).repeat(belief.segments(n))
         else:
-            c = p * np.exp(self._log_prior + self._created[a, rows] - log_norm)
-            if mode == "zero_uniform":  # row i spreads over columns j <= i
-                pred += np.repeat(np.concatenate((np.cumsum(c[::-1])[::-1], [0.0])), segment)
-            else:
-                pred[rows] += c
+            pred[rows] += c
         return pred
 
     def _predict_literal(self, belief: Belief, a: int) -> FloatArray:
         n = self._n
-        rows = np.arange(n)
         p = belief.dense(n)
-        log_norm = self._log_norm(a, rows)
         vals, cols = self._vals[a][:n], self._cols[a][:n]
-        pred: FloatArray = (vals * p[cols]).sum(axis=1) * np.exp(self._offset[a, :n] - log_norm)
+        pred: FloatArray = (vals * p[cols]).sum(axis=1) * self._learned_scale[a, :n]
         mode = self.config.expansion
+        scale = self._pad_scale[a, :n]
         if mode == "prior":
             pad = self._pad[a, :n]
             at_or_below = np.cumsum(p)
             weighted = np.cumsum(p * pad)
-            scale = np.exp(self._log_prior + self._created[a, n - 1] - log_norm)
             pred += scale * (pad * at_or_below + (weighted[-1] - weighted))
         else:
-            scale = np.exp(self._log_prior + self._created[a, :n] - log_norm)
             pred += scale * (np.cumsum(p) if mode == "zero_uniform" else p)
         return pred
 
@@ -215,6 +236,8 @@ class LazyTransitions:
             self._nnz[a, state] = 0
             self._row_sum[a, state] = 0.0
             self._offset[a, state] = -self._log_decay[a]
+        with np.errstate(divide="ignore"):  # the row has no learned mass any more
+            self._refresh_scales(np.s_[:, state])
 
     def matrix(self, action_bin: int) -> FloatArray:
         """The dense n x n matrix of one action (for snapshots and tests)."""
@@ -222,16 +245,14 @@ class LazyTransitions:
         if n == 0:
             return np.zeros((0, 0))
         rows = np.arange(n)
-        log_norm = self._log_norm(a, rows)
         mode = self.config.expansion
+        scale = self._pad_scale[a, :n]
         if mode == "prior":
-            scale = np.exp(self._log_prior + self._created[a, n - 1] - log_norm)
             out: FloatArray = self._pad[a, np.maximum.outer(rows, rows)] * scale[:, None]
         else:
-            scale = np.exp(self._log_prior + self._created[a, :n] - log_norm)
             shape = np.tril(np.ones((n, n))) if mode == "zero_uniform" else np.eye(n)
             out = shape * scale[:, None]
-        learned = self._vals[a][:n] * np.exp(self._offset[a, :n] - log_norm)[:, None]
+        learned = self._vals[a][:n] * self._learned_scale[a, :n, None]
         np.add.at(out, (np.repeat(rows, learned.shape[1]), self._cols[a][:n].ravel()),
                   learned.ravel())
         return out
@@ -241,13 +262,18 @@ class LazyTransitions:
         a = action_bin
         if self._n == 0:
             return np.zeros(0)
-        mass: FloatArray = np.exp(self._log_decay[a] + self._log_norm(a, np.arange(self._n)))
+        n = self._n
+        with np.errstate(divide="ignore"):  # a row never learned has no learned mass
+            log_learned = self._offset[a, :n] + np.log(self._row_sum[a, :n])
+        log_norm = np.logaddexp(self._log_pad[a, :n], log_learned)
+        mass: FloatArray = np.exp(self._log_decay[a] + log_norm)
         return mass
 
     def nbytes(self) -> int:
         """Memory held by the matrices."""
         arrays: list[npt.NDArray[Any]] = [
             self._created, self._pad, self._pad_tail, self._offset, self._row_sum, self._nnz,
+            self._log_pad, self._log_level, self._learned_scale, self._pad_scale,
             self._scratch, *self._cols, *self._vals,
         ]
         return sum(int(x.nbytes) for x in arrays)
@@ -293,6 +319,8 @@ class LazyTransitions:
         self._offset = np.zeros((q, n))
         self._row_sum = np.zeros((q, n))
         self._nnz = np.zeros((q, n), dtype=np.int64)
+        for name in ("_log_pad", "_log_level", "_learned_scale", "_pad_scale"):
+            setattr(self, name, np.zeros((q, n)))
         for a, entry in enumerate(data["actions"]):
             width = int(entry["width"])
             nnz = np.array(entry["nnz"], dtype=np.int64).reshape(n)
@@ -304,5 +332,12 @@ class LazyTransitions:
             self._vals[a] = np.zeros((n, width))
             self._cols[a][valid] = np.array(entry["cols"], dtype=np.int32)
             self._vals[a][valid] = np.array(entry["vals"], dtype=np.float64)
-        self._refresh_pads()
+        self._refresh()
         return self
+
+
+def _suffix_sums(x: FloatArray) -> FloatArray:
+    """``out[i] = sum_{m >= i} x[m]``, with a trailing 0: sums over rows at or after i."""
+    out = np.zeros(x.size + 1)
+    x[::-1].cumsum(out=out[-2::-1])
+    return out

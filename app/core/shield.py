@@ -199,7 +199,7 @@ class Shield:
                 f"observation must hold {self._dim} numbers, got shape {list(z.shape)}",
                 field="observation",
             )
-        if not np.all(np.isfinite(z)):
+        if not np.isfinite(z).all():
             raise InvalidObservation("observation must be finite (no NaN or infinity)",
                                      field="observation")
         if not isinstance(stream, str) or not 1 <= len(stream) <= 128:
