@@ -8,6 +8,7 @@ reading. Values are checked on construction and errors name the dotted field at 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -74,7 +75,7 @@ class ActionSpec:
             "the range must hold a whole number (>= 2) of steps",
         )
 
-    @property
+    @functools.cached_property
     def n_bins(self) -> int:
         """Number of discrete actions q (20 for [-2, 2] with delta = 0.2)."""
         return round((self.high - self.low) / self.step)

@@ -79,6 +79,32 @@ def test_tpm_rows_stay_distributions_and_forms_agree(ops_list: list, mode: str,
             np.testing.assert_allclose(probabilities(F[a], F_o[a]), P, atol=1e-12)
 
 
+@given(ops, st.sampled_from(["prior", "zero_uniform", "zero_identity"]),
+       st.lists(st.integers(0, 40), max_size=3))
+def test_lazy_scales_kept_per_row_equal_a_fresh_computation(
+        ops_list: list, mode: str, resets: list[int]) -> None:  # type: ignore[type-arg]
+    """The row scales that learning updates in place are what a restore computes anew."""
+    cfg = TransitionConfig(expansion=mode, on_replace="reset")  # type: ignore[arg-type]
+    lazy = LazyTransitions(3, cfg, 100)
+    for op in ["grow", *ops_list]:
+        if op == "grow":
+            lazy.add_state()
+            continue
+        a, s1, s2 = op
+        n = lazy.n_states
+        lazy.learn_one(top_k(np.random.default_rng(s1).random(n), 4), a,
+                       top_k(np.random.default_rng(s2).random(n), 4))
+    for state in resets:
+        lazy.reset_row(state % lazy.n_states)
+    fresh = LazyTransitions.restore(3, cfg, 100, lazy.snapshot())
+    belief = top_k(np.random.default_rng(0).random(lazy.n_states), 4)
+    for a in range(3):
+        for transpose in (True, False):
+            np.testing.assert_array_equal(fresh.predict(belief, a, transpose),
+                                          lazy.predict(belief, a, transpose))
+        np.testing.assert_array_equal(fresh.row_mass(a), lazy.row_mass(a))
+
+
 @given(streams)
 def test_invariants_hold_on_any_stream(steps: list) -> None:  # type: ignore[type-arg]
     shield = Shield(ShieldConfig(limits=LimitsConfig(belief_top_k=4)))
