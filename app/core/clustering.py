@@ -7,6 +7,7 @@ All distances are in normalised units (see :class:`~app.core.config.ObservationS
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -106,33 +107,38 @@ class EvolvingClusterer:
             var = cfg.epsilon**2 / 4.0
         self._variances[i] = max(var, cfg.min_variance)
 
-    def sq_distances(self, z: FloatArray) -> FloatArray:
-        """Squared distances from z to every centre: ||c||^2 - 2 c.z + ||z||^2, clipped at 0."""
+    def sq_distances(self, z: FloatArray, sq_norm: float | None = None) -> FloatArray:
+        """Squared distances from z to every centre: ||c||^2 - 2 c.z + ||z||^2, clipped at 0.
+
+        ``sq_norm`` is ||z||^2 where the caller has it already.
+        """
         n = self._n
-        d2 = self._sq_norms[:n] - 2.0 * (self._centres[:n] @ z) + float(z @ z)
-        return np.maximum(d2, 0.0)
+        if sq_norm is None:
+            sq_norm = float(z @ z)
+        d2 = self._sq_norms[:n] - 2.0 * (self._centres[:n] @ z) + sq_norm
+        return np.maximum(d2, 0.0, out=d2)
 
     def learn_one(self, z: FloatArray) -> StateUpdate:
         """Cluster one normalised observation; may create or move one state."""
         cfg = self.config
         self.k += 1
         k = self.k
+        theta = float(z @ z)
         if self._n == 0:  # first sample: centre 1 with potential 1 (§2.2.3)
             index = self._add(z, potential=1.0)
-            self._accumulate(z)
+            self._accumulate(z, theta)
             return StateUpdate("new", index, np.zeros(1))
 
         n = self._n
-        d2 = self.sq_distances(z)
+        d2 = self.sq_distances(z, theta)
         # §2.2.1: P_k(z_k) = (k-1) / ((k-1)(theta+1) + sigma - 2 nu)
-        theta = float(z @ z)
         nu = float(z @ self.beta)
         p_new = (k - 1) / ((k - 1) * (theta + 1.0) + self.sigma - 2.0 * nu)
         # §2.2.2: P_k(c_i) = (k-1) P_{k-1}(c_i) / (k-2 + P_{k-1}(c_i) (1 + d_i^2))
         pot = self._potentials[:n]
         pot[:] = (k - 1) * pot / (k - 2 + pot * (1.0 + d2))
         nearest = int(d2.argmin())
-        delta = float(np.sqrt(d2[nearest]))
+        delta = math.sqrt(d2[nearest])
         p_max = float(pot.max())
 
         if cfg.creation_rule == "ets_plus":  # eTS+: novel if above all or below all
@@ -144,9 +150,9 @@ class EvolvingClusterer:
 
         if candidate and replace:
             self._centres[nearest] = z
-            self._sq_norms[nearest] = float(z @ z)
+            self._sq_norms[nearest] = theta
             self._potentials[nearest] = p_new
-            d2 = self.sq_distances(z)
+            d2 = self.sq_distances(z, theta)
             update = StateUpdate("replaced", nearest, d2)
         elif candidate and n < self.max_states:
             index = self._add(z, potential=p_new)
@@ -154,9 +160,9 @@ class EvolvingClusterer:
         else:
             if candidate:
                 self.capacity_hits += 1
-            self._assign(nearest, d2[nearest])
+            self._assign(nearest, float(d2[nearest]))
             update = StateUpdate("assigned", nearest, d2)
-        self._accumulate(z)
+        self._accumulate(z, theta)
         return update
 
     def _add(self, z: FloatArray, potential: float) -> int:
@@ -182,15 +188,17 @@ class EvolvingClusterer:
     def _assign(self, index: int, sq_distance: float) -> None:
         # §2.4: scatter_i += ||z - c_i||^2; r_i = rho r_i + (1 - rho) sqrt(scatter_i / N_i)
         rho = self.config.rho
-        self._support[index] += 1
-        self._scatter[index] += sq_distance
-        local = np.sqrt(self._scatter[index] / self._support[index])
-        self._radii[index] = rho * self._radii[index] + (1.0 - rho) * local
+        support = int(self._support[index]) + 1
+        scatter = float(self._scatter[index]) + sq_distance
+        self._support[index] = support
+        self._scatter[index] = scatter
+        local = math.sqrt(scatter / support)
+        self._radii[index] = rho * float(self._radii[index]) + (1.0 - rho) * local
         self._refresh_variance(index)
 
-    def _accumulate(self, z: FloatArray) -> None:
+    def _accumulate(self, z: FloatArray, sq_norm: float) -> None:
         self.beta += z
-        self.sigma += float(z @ z)
+        self.sigma += sq_norm
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state as plain data and arrays."""
