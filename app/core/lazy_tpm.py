@@ -133,8 +133,11 @@ class LazyTransitions:
         row_sum[rows] = learned
         contrib = lr * tau[:, None] * gamma[None, :]
 
-        # the rows' new normalisers (see _refresh_scales)
-        log_norm = np.logaddexp(self._log_pad[a, rows], base + np.log(learned))
+        # the rows' new normalisers (see _refresh_scales); a belief state of negligible
+        # probability can leave its row's learned mass at 0
+        with np.errstate(divide="ignore"):
+            log_learned = base + np.log(learned)
+        log_norm = np.logaddexp(self._log_pad[a, rows], log_learned)
         self._learned_scale[a, rows] = np.exp(base - log_norm)
         self._pad_scale[a, rows] = np.exp(self._log_level[a, rows] - log_norm)
 

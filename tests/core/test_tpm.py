@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -165,3 +167,17 @@ def test_lazy_snapshot_restores_bit_for_bit() -> None:
     for a in range(3):
         np.testing.assert_array_equal(copy.matrix(a), lazy.matrix(a))
         np.testing.assert_array_equal(copy.predict(prev, a, True), lazy.predict(prev, a, True))
+
+
+def test_a_belief_state_of_negligible_probability_learns_quietly() -> None:
+    """lr * tau underflows to 0 for a subnormal tau: the row keeps its padding, no warning."""
+    lazy = LazyTransitions(1, TransitionConfig(), 10)
+    lazy.add_state()
+    lazy.add_state()
+    tiny = Belief(np.array([0, 1]), np.array([1.0, 5e-324]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        lazy.learn_one(tiny, 0, one_hot(0))
+        P = lazy.matrix(0)
+    np.testing.assert_allclose(P.sum(axis=1), 1.0)
+    np.testing.assert_allclose(P[1], [0.5, 0.5], rtol=1e-12)  # still the padding alone
