@@ -153,7 +153,7 @@ def test_a8_the_transition_is_learned_under_the_executed_or_the_proposed_action(
 def test_a9_spread_definitions_differ() -> None:
     variances = {}
     for spread in ("radius", "member_variance", "ets2004"):
-        c = EvolvingClusterer(ClusteringConfig(spread=spread), 1, 10)  # type: ignore[arg-type]
+        c = EvolvingClusterer(ClusteringConfig(epsilon=0.3, spread=spread), 1, 10)  # type: ignore[arg-type]
         for z in (0.0, 0.1, 0.05):  # 0.1 joins state 0, 0.05 then moves it
             c.learn_one(np.array([z]))
         variances[spread] = float(c.variances()[0])
