@@ -13,7 +13,7 @@ source scripts/_venv.sh
 out=results/tuning/epsilon
 scale=results/tuning/scale
 for seed in 0 1 2; do
-    for eps in 0.15; do
+    for eps in 0.15 0.3; do  # 0.3 again here: this round's machine (see results/README.md)
         .venv/bin/python -m client run --arms ddpg+shield \
             --shield-config "{\"clustering\": {\"epsilon\": $eps}}" \
             --out "$out/seed-$seed/epsilon-$eps" --runs 2 --episodes 250 --seed "$seed" \
@@ -21,9 +21,9 @@ for seed in 0 1 2; do
     done
 done
 .venv/bin/python -m client compare \
-    results/tuning/switches/ddpg "$scale"/headway-50 "$out"/seed-0/epsilon-0.15 \
-    results/tuning/seed-1/ddpg "$scale"/seed-1/headway-50 "$out"/seed-1/epsilon-0.15 \
-    "$scale"/seed-2/{ddpg,headway-50} "$out"/seed-2/epsilon-0.15 \
+    results/tuning/switches/ddpg "$scale"/headway-50 "$out"/seed-0/epsilon-{0.3,0.15} \
+    results/tuning/seed-1/ddpg "$scale"/seed-1/headway-50 "$out"/seed-1/epsilon-{0.3,0.15} \
+    "$scale"/seed-2/{ddpg,headway-50} "$out"/seed-2/epsilon-{0.3,0.15} \
     --out "$out/epsilon.md"
 .venv/bin/python -m client run --arms ddpg+shield \
     --shield-config '{"clustering": {"epsilon": 0.15}}' \
