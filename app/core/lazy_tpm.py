@@ -104,13 +104,13 @@ class LazyTransitions:
             self._log_pad[:, :n] = self._log_level[:, :n]
             if mode == "zero_uniform":
                 self._log_pad[:, :n] += np.log(np.arange(1.0, n + 1))
-        with np.errstate(divide="ignore"):  # a row never learned has no learned mass
-            self._refresh_scales(np.s_[:, :n])
+        at = np.s_[:, :n]
+        self._refresh_scales(at, self._offset[at], self._row_sum[at])
 
-    def _refresh_scales(self, at: Any) -> None:
-        """Row i of P^a is ``learned_scale(i) * vals(i) + pad_scale(i) * padding(i)``."""
-        offset = self._offset[at]
-        log_norm = np.logaddexp(self._log_pad[at], offset + np.log(self._row_sum[at]))
+    def _refresh_scales(self, at: Any, offset: Any, row_sum: FloatArray) -> None:
+        """Row i of P^a is ``learned_scale(i) * vals(i) + pad_scale(i) * padding(i)``, for the
+        rows ``at`` whose offsets and learned sums are given."""
+        log_norm = _log_norm(self._log_pad[at], offset, row_sum)
         self._learned_scale[at] = np.exp(offset - log_norm)
         self._pad_scale[at] = np.exp(self._log_level[at] - log_norm)
 
@@ -132,14 +132,7 @@ class LazyTransitions:
         learned = row_sum[rows] * factor + lr * tau * gamma.sum()
         row_sum[rows] = learned
         contrib = lr * tau[:, None] * gamma[None, :]
-
-        # the rows' new normalisers (see _refresh_scales); a belief state of negligible
-        # probability can leave its row's learned mass at 0
-        with np.errstate(divide="ignore"):
-            log_learned = base + np.log(learned)
-        log_norm = np.logaddexp(self._log_pad[a, rows], log_learned)
-        self._learned_scale[a, rows] = np.exp(base - log_norm)
-        self._pad_scale[a, rows] = np.exp(self._log_level[a, rows] - log_norm)
+        self._refresh_scales((a, rows), base, learned)
 
         nnz = nnz_a[rows]
         width = self._vals[a].shape[1]
@@ -239,8 +232,8 @@ class LazyTransitions:
             self._nnz[a, state] = 0
             self._row_sum[a, state] = 0.0
             self._offset[a, state] = -self._log_decay[a]
-        with np.errstate(divide="ignore"):  # the row has no learned mass any more
-            self._refresh_scales(np.s_[:, state])
+        at = np.s_[:, state]
+        self._refresh_scales(at, self._offset[at], self._row_sum[at])
 
     def matrix(self, action_bin: int) -> FloatArray:
         """The dense n x n matrix of one action (for snapshots and tests)."""
@@ -266,9 +259,7 @@ class LazyTransitions:
         if self._n == 0:
             return np.zeros(0)
         n = self._n
-        with np.errstate(divide="ignore"):  # a row never learned has no learned mass
-            log_learned = self._offset[a, :n] + np.log(self._row_sum[a, :n])
-        log_norm = np.logaddexp(self._log_pad[a, :n], log_learned)
+        log_norm = _log_norm(self._log_pad[a, :n], self._offset[a, :n], self._row_sum[a, :n])
         mass: FloatArray = np.exp(self._log_decay[a] + log_norm)
         return mass
 
@@ -337,6 +328,15 @@ class LazyTransitions:
             self._vals[a][valid] = np.array(entry["vals"], dtype=np.float64)
         self._refresh()
         return self
+
+
+def _log_norm(log_pad: FloatArray, offset: Any, row_sum: FloatArray) -> FloatArray:
+    """``log(F_o / D_a)`` of rows: their padding mass (+) their learned mass. A row without
+    learned mass (never learned, reset, or reached only by a belief state of negligible
+    probability) has log 0 = -inf there, and its normaliser is the padding alone."""
+    with np.errstate(divide="ignore"):
+        log_norm: FloatArray = np.logaddexp(log_pad, offset + np.log(row_sum))
+    return log_norm
 
 
 def _suffix_sums(x: FloatArray) -> FloatArray:
