@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# What one call of the device tool's GPU machine runs (16 cores and one GPU; 15 minutes of
+# device time a session, so everything in one call):
+#
+#   1. the lockstep tests, whose CUDA cases skip everywhere else (the graph-captured update
+#      must learn what separate runs learn);
+#   2. bench/learner.py: a training step of 1, 5 and 10 learners, separate, batched on the
+#      CPU and batched as a CUDA graph;
+#   3. the paper's protocol (results/paper-protocol.sh) in each arrangement named in LAYOUTS,
+#      from episode 1 for SECONDS seconds each, then stopped: how fast each arrangement trains
+#      on this machine, from the records (steps and wall_s of every episode).
+#
+#   bench/device.sh OUT           (OUT: a new folder; PYTHON defaults to python3)
+#
+# A layout is "NAME:VARIABLES" with the variables of results/paper-protocol.sh, for example
+# "gpu-ws:LOCKSTEP=1 DEVICE=cuda GROUP=10 TRANSPORT=ws". What it writes under OUT: machine.txt,
+# tests.log, learner.json, learner.md, and per layout NAME.tar.gz (its records, its services'
+# logs and the protocol's output, protocol.log): at most 8 files come back from the machine.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+out=$(realpath -m "$1")
+python=${PYTHON:-python3}
+seconds=${SECONDS_EACH:-180}
+layouts=${LAYOUTS:-"gpu-ws:LOCKSTEP=1 DEVICE=cuda GROUP=10 TRANSPORT=ws"}
+mkdir -p "$out"
+export PYTHONUNBUFFERED=1
+{
+    echo "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | xargs), $(nproc --all) cores"
+    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>&1 | sed 's/^/gpu: /'
+    "$python" -c 'import sys, numpy, torch; print("versions: python", sys.version.split()[0],
+        "numpy", numpy.__version__, "torch", torch.__version__)'
+    echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
+} >"$out/machine.txt"
+cat "$out/machine.txt"
+
+"$python" -m pytest -p no:cacheprovider -q -rs tests/client/test_ensemble.py 2>&1 |
+    tee "$out/tests.log"
+"$python" bench/learner.py --rounds 3 --steps 200 --json "$out/learner.json" 2>&1 |
+    tee "$out/learner.md"
+
+IFS=';' read -ra chosen <<<"$layouts"
+for layout in "${chosen[@]}"; do
+    name=${layout%%:*}
+    work=$(mktemp -d)
+    echo "== $name: ${layout#*:} for $seconds s"
+    # shellcheck disable=SC2086  # the layout's variables are words
+    env ${layout#*:} PYTHON="$python" timeout "$seconds" results/paper-protocol.sh \
+        "$work/$name" >"$work/protocol.log" 2>&1
+    echo "stopped after $seconds s (status $?)" >>"$work/protocol.log"
+    mv "$work/protocol.log" "$work/$name/"
+    tar -czf "$out/$name.tar.gz" -C "$work" "$name"
+    tail -3 "$work/$name/protocol.log"
+done
