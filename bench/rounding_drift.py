@@ -1,0 +1,74 @@
+"""How far lockstep learners drift from separate runs over 300 updates, and why.
+
+The same three DDPG runs are trained twice on the same observations and rewards, each path
+from its own actions: as separate learners on the CPU and as one batched ensemble. Per window
+of 50 steps, the largest difference between the two paths' actions. Rows:
+
+* ``cpu``: the ensemble on the CPU, where most operations round as the separate runs' do;
+* ``cpu + noise R``: the same, every weight multiplied by (1 + R x a standard normal) after
+  each update, R about one float32 unit in the last place: what learning makes of
+  rounding-sized differences at every update;
+* ``cuda``: the ensemble as a CUDA graph, where almost every operation rounds differently.
+
+    python bench/rounding_drift.py
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from client.agents.ddpg import DDPG, DDPGConfig  # noqa: E402
+from client.agents.ensemble import DDPGEnsemble  # noqa: E402
+
+STEPS, WINDOW, SEEDS = 300, 50, [11, 12, 13]
+CONFIG = DDPGConfig(warmup=64)
+
+
+def drift(device: str, noise: float = 0.0) -> list[float]:
+    """The largest action difference in every window of ``WINDOW`` steps."""
+    ensemble = DDPGEnsemble(CONFIG, SEEDS, device)
+    single = [DDPG(CONFIG, seed) for seed in SEEDS]
+    rng, nudges = np.random.default_rng(0), torch.Generator().manual_seed(0)
+    obs = rng.uniform(0, 30, (3, 4)).astype(np.float32)
+    worst = []
+    for _ in range(STEPS):
+        batched = ensemble.act(obs)
+        alone = [agent.act(o) for agent, o in zip(single, obs, strict=True)]
+        worst.append(float(np.max(np.abs(np.subtract(batched, alone)))))
+        following = rng.uniform(0, 30, (3, 4)).astype(np.float32)
+        reward = rng.uniform(-3, 0, 3)
+        for k in range(3):
+            ensemble.members[k].remember(obs[k], batched[k], reward[k], following[k], False)
+            single[k].remember(obs[k], alone[k], reward[k], following[k], False)
+        ensemble.update()
+        for agent in single:
+            agent.update()
+        if noise and single[0].buffer.count >= CONFIG.warmup:
+            with torch.no_grad():
+                for p in [*ensemble.actor, *ensemble.critic,
+                          *ensemble.actor_target, *ensemble.critic_target]:
+                    p.mul_(1 + noise * torch.randn(p.shape, generator=nudges))
+        obs = following
+    return [max(worst[i:i + WINDOW]) for i in range(0, STEPS, WINDOW)]
+
+
+def main() -> None:
+    torch.set_num_threads(1)
+    rows = [("cpu", "cpu", 0.0), ("cpu + noise 6e-8", "cpu", 6e-8),
+            ("cpu + noise 3e-7", "cpu", 3e-7)]
+    if torch.cuda.is_available():
+        rows.append(("cuda", "cuda", 0.0))
+    windows = " | ".join(f"{i}-{i + WINDOW - 1}" for i in range(0, STEPS, WINDOW))
+    print(f"| path | {windows} |\n|---|" + "---:|" * (STEPS // WINDOW))
+    for name, device, noise in rows:
+        print(f"| {name} | " + " | ".join(f"{d:.1e}" for d in drift(device, noise)) + " |")
+
+
+if __name__ == "__main__":
+    main()
