@@ -7,10 +7,14 @@
 #   2. bench/learner.py: a training step of 1, 5 and 10 learners, separate, batched on the
 #      CPU and batched as a CUDA graph;
 #   3. the paper's protocol (results/paper-protocol.sh) in each arrangement named in LAYOUTS,
-#      from episode 1 for SECONDS seconds each, then stopped: how fast each arrangement trains
+#      from episode 1 for SECONDS_EACH seconds each (default 180), then stopped: how fast each arrangement trains
 #      on this machine, from the records (steps and wall_s of every episode).
 #
 #   bench/device.sh OUT           (OUT: a new folder; PYTHON defaults to python3)
+#
+# That machine has torch and numpy but not the service's and client's other packages:
+# bench/device_wheels.sh fetches them here as wheels, and its header says how the call
+# installs them. bench/device_pace.py turns the layouts' archives into a table.
 #
 # A layout is "NAME:VARIABLES" with the variables of results/paper-protocol.sh, for example
 # "gpu-ws:LOCKSTEP=1 DEVICE=cuda GROUP=10 TRANSPORT=ws". What it writes under OUT: machine.txt,
