@@ -15,8 +15,11 @@
 #   (nothing)       every run in its own process on the CPU, every shielded run asking a
 #                   service of its own over WebSocket (a sidecar per controller): 16 cores or more
 #   LOCKSTEP=1      the runs of an arm train in lockstep groups (client/agents/ensemble.py):
-#                   GROUP runs per shielded group (default 5), DDPG_GROUP per group of DDPG
-#                   alone (default GROUP); DEVICE=cuda puts the groups' updates on the GPU
+#                   GROUP runs per shielded group (default 5; with DEVICE=cuda all the runs),
+#                   DDPG_GROUP per group of DDPG alone (default GROUP); DEVICE=cuda puts the
+#                   groups' updates on the GPU. On the device's H200 machine one group of 10
+#                   per arm trained 2.9x (DDPG alone) and 1.1x (shielded) as fast as a process
+#                   per run, and groups of 2 were slower than both (BENCHMARKS.md)
 #   TRANSPORT=batch SERVICES services (default 1) for the shielded runs, run i on service
 #                   i mod SERVICES; a lockstep group's round of steps is one request of the
 #                   batch route per service, all in flight at once (default ws: a service
@@ -34,15 +37,13 @@ out=${1:-results/paper-protocol-eps-0.15}
 runs=${RUNS:-10}
 episodes=${EPISODES:-1500}
 first_port=${PORT:-8300}
-device=${DEVICE:-}
-group=${GROUP:-5}
 if [ -z "${PYTHON:-}" ]; then
     source scripts/_venv.sh
     PYTHON=.venv/bin/python
 fi
 lockstep=${LOCKSTEP:-}
 device=${DEVICE:-cpu}
-group=${GROUP:-5}
+[ "$device" = cuda ] && group=${GROUP:-$runs} || group=${GROUP:-5}
 ddpg_group=${DDPG_GROUP:-$group}
 transport=${TRANSPORT:-ws}
 case "$transport" in
