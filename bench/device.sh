@@ -33,7 +33,9 @@ export PYTHONUNBUFFERED=1
     nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>&1 | sed 's/^/gpu: /'
     "$python" -c 'import sys, numpy, torch; print("versions: python", sys.version.split()[0],
         "numpy", numpy.__version__, "torch", torch.__version__)'
-    echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
+    # the machine's copy of the history may predate the session's commits: say what differs
+    echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)," \
+        "$(git status --porcelain 2>/dev/null | wc -l) paths changed or new in the working tree"
 } >"$out/machine.txt"
 cat "$out/machine.txt"
 
