@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -30,20 +31,22 @@ STEPS, WINDOW, SEEDS = 300, 50, [11, 12, 13]
 CONFIG = DDPGConfig(warmup=64)
 
 
-def drift(device: str, noise: float = 0.0) -> list[float]:
-    """The largest action difference in every window of ``WINDOW`` steps."""
-    ensemble = DDPGEnsemble(CONFIG, SEEDS, device)
-    single = [DDPG(CONFIG, seed) for seed in SEEDS]
+def train_side_by_side(ensemble: DDPGEnsemble, single: list[DDPG], steps: int,
+                       noise: float = 0.0) -> tuple[list[float], npt.NDArray[np.float32]]:
+    """Train the ensemble and the separate learners on the same observations and rewards,
+    each from its own actions; with ``noise``, nudge the ensemble's weights after each update.
+    The largest action difference of every step, and the observations that come next."""
     rng, nudges = np.random.default_rng(0), torch.Generator().manual_seed(0)
-    obs = rng.uniform(0, 30, (3, 4)).astype(np.float32)
+    n = len(single)
+    obs = rng.uniform(0, 30, (n, 4)).astype(np.float32)
     worst = []
-    for _ in range(STEPS):
+    for _ in range(steps):
         batched = ensemble.act(obs)
         alone = [agent.act(o) for agent, o in zip(single, obs, strict=True)]
         worst.append(float(np.max(np.abs(np.subtract(batched, alone)))))
-        following = rng.uniform(0, 30, (3, 4)).astype(np.float32)
-        reward = rng.uniform(-3, 0, 3)
-        for k in range(3):
+        following = rng.uniform(0, 30, (n, 4)).astype(np.float32)
+        reward = rng.uniform(-3, 0, n)
+        for k in range(n):
             ensemble.members[k].remember(obs[k], batched[k], reward[k], following[k], False)
             single[k].remember(obs[k], alone[k], reward[k], following[k], False)
         ensemble.update()
@@ -55,6 +58,13 @@ def drift(device: str, noise: float = 0.0) -> list[float]:
                           *ensemble.actor_target, *ensemble.critic_target]:
                     p.mul_(1 + noise * torch.randn(p.shape, generator=nudges))
         obs = following
+    return worst, obs
+
+
+def drift(device: str, noise: float = 0.0) -> list[float]:
+    """The largest action difference in every window of ``WINDOW`` steps."""
+    ensemble = DDPGEnsemble(CONFIG, SEEDS, device)
+    worst, _ = train_side_by_side(ensemble, [DDPG(CONFIG, s) for s in SEEDS], STEPS, noise)
     return [max(worst[i:i + WINDOW]) for i in range(0, STEPS, WINDOW)]
 
 

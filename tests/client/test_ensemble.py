@@ -9,16 +9,19 @@ import numpy as np
 import pytest
 import torch
 
+from bench.rounding_drift import CONFIG as CONFIG_DRIFT
+from bench.rounding_drift import SEEDS, train_side_by_side
 from client.agents.ddpg import DDPG, DDPGConfig
 from client.agents.ensemble import DDPGEnsemble
 from client.experiment import records, runner
 
 # Batched products may round differently from single ones, and learning amplifies any such
-# difference (bench/rounding_drift.py). On the CPU, where most operations round alike, actions
-# still agree to about 1e-5 m/s^2 after 300 steps (measured: 6e-6). On CUDA almost every
-# operation rounds differently: on an H200 (torch 2.11) actions parted by 1.1e-5 within the
-# first 100 steps and first by more than 1e-4 at step 122, so the CUDA case compares the first
-# 100 steps (37 updates, 34 of them graph replays).
+# difference (bench/rounding_drift.py, whose training loop this test runs). On the CPU, where
+# most operations round alike, actions still agree to about 1e-5 m/s^2 after 300 steps
+# (measured: 6e-6). On CUDA almost every operation rounds differently: on an H200 (torch
+# 2.11) actions parted by 1.1e-5 within the first 100 steps and first by more than 1e-4 at
+# step 122, so the CUDA case compares the first 100 steps (37 updates, 34 of them graph
+# replays).
 ACTION_TOLERANCE = 1e-4
 STEPS = {"cpu": 300, "cuda": 100}
 
@@ -32,23 +35,10 @@ def test_ensemble_members_learn_like_separate_runs(device: str) -> None:
     """On CUDA the update is a captured graph after a few eager ones: the replays must go on
     learning what the separate runs learn, within rounding."""
     torch.set_num_threads(1)
-    config, seeds = DDPGConfig(warmup=64), [11, 12, 13]
-    ensemble, single = DDPGEnsemble(config, seeds, device), [DDPG(config, s) for s in seeds]
-    rng = np.random.default_rng(0)
-    obs = rng.uniform(0, 30, (3, 4)).astype(np.float32)
-    for _ in range(STEPS[device]):
-        batched = ensemble.act(obs)
-        alone = [agent.act(o) for agent, o in zip(single, obs, strict=True)]
-        np.testing.assert_allclose(batched, alone, atol=ACTION_TOLERANCE)
-        following = rng.uniform(0, 30, (3, 4)).astype(np.float32)
-        reward = rng.uniform(-3, 0, 3)
-        for k in range(3):
-            ensemble.members[k].remember(obs[k], batched[k], reward[k], following[k], False)
-            single[k].remember(obs[k], alone[k], reward[k], following[k], False)
-        ensemble.update()
-        for agent in single:
-            agent.update()
-        obs = following
+    ensemble = DDPGEnsemble(CONFIG_DRIFT, SEEDS, device)
+    single = [DDPG(CONFIG_DRIFT, s) for s in SEEDS]
+    worst, obs = train_side_by_side(ensemble, single, STEPS[device])
+    assert max(worst) <= ACTION_TOLERANCE
     if device == "cuda":
         assert ensemble._graph is not None  # the replays were tested, not eager updates
     greedy = ensemble.act(obs, explore=False)
