@@ -6,7 +6,8 @@
 # following. One table, results/tuning/epsilon/epsilon.md. Then, with 0.15 chosen from that
 # table, the same row on the evaluation seeds as a row of the reduced protocol
 # (results/reduced.sh: base seed 1000, 2 runs x 300 episodes), beside DDPG alone and the 50 m
-# row there, and the 0.3 row run again on the machine of the 0.15 row (the 50 m row of
+# row there (after tuning seed 3 with 4 runs per value, added later), and the 0.3 row run
+# again on the machine of the 0.15 row (the 50 m row of
 # reduced.sh was recorded on an earlier machine that rounds differently; see results/README.md):
 # results/reduced/epsilon.md. Resumable: finished experiments are skipped.
 set -euo pipefail
@@ -27,6 +28,14 @@ done
     results/tuning/seed-1/ddpg "$scale"/seed-1/headway-50 "$out"/seed-1/epsilon-{0.3,0.15} \
     "$scale"/seed-2/{ddpg,headway-50} "$out"/seed-2/epsilon-{0.3,0.15} \
     --out "$out/epsilon.md"
+# more runs on one more tuning seed: 4 runs x 250 episodes per value, base seed 3
+for eps in 0.15 0.3; do
+    .venv/bin/python -m client run --arms ddpg+shield \
+        --shield-config "{\"clustering\": {\"epsilon\": $eps}}" \
+        --out "$out/seed-3/epsilon-$eps" --runs 4 --episodes 250 --seed 3 \
+        --shield local --workers 2 >/dev/null
+done
+.venv/bin/python -m client compare "$out"/seed-3/epsilon-{0.3,0.15} --out "$out/seed-3.md"
 for eps in 0.15 0.3; do
     .venv/bin/python -m client run --arms ddpg+shield \
         --shield-config "{\"clustering\": {\"epsilon\": $eps}}" \

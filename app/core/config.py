@@ -112,9 +112,9 @@ class ClusteringConfig:
     learning constant, epsilon the zone-of-influence radius in normalised units and the initial
     spread of a new state (§2.3). The default halves the paper's epsilon of 0.3: at 0.3 the
     model kept 5-12 states, a few runs were caught braking in a coarse state flagged for
-    collision, and 0.15 (12-17 states) succeeded more on all three tuning seeds when both ran
-    on one machine; on the evaluation seeds, on one machine, the two were level (results/
-    README.md, "The clustering radius"; tuned on seeds 0-2).
+    collision, and 0.15 (12-17 states) succeeded more on three tuning seeds when both ran on
+    one machine; on a fourth tuning seed (four runs each) and on the evaluation seeds the two
+    were level (results/README.md, "The clustering radius"; tuned on seeds 0-3).
     """
 
     rho: float = 0.7
