@@ -5,10 +5,12 @@
 #   1. the lockstep tests, whose CUDA cases skip everywhere else (the graph-captured update
 #      must learn what separate runs learn);
 #   2. bench/learner.py: a training step of 1, 5 and 10 learners, separate, batched on the
-#      CPU and batched as a CUDA graph;
+#      CPU and batched as a CUDA graph; bench/rounding_drift.py: how far the CUDA ensemble
+#      drifts from separate runs;
 #   3. the paper's protocol (results/paper-protocol.sh) in each arrangement named in LAYOUTS,
-#      from episode 1 for SECONDS_EACH seconds each (default 180), then stopped: how fast each arrangement trains
-#      on this machine, from the records (steps and wall_s of every episode).
+#      from episode 1 for SECONDS_EACH seconds each (default 180), then stopped: how fast
+#      each arrangement trains on this machine, from the records (steps and wall_s of every
+#      episode).
 #
 #   bench/device.sh OUT           (OUT: a new folder; PYTHON defaults to python3)
 #
@@ -18,8 +20,9 @@
 #
 # A layout is "NAME:VARIABLES" with the variables of results/paper-protocol.sh, for example
 # "gpu-ws:LOCKSTEP=1 DEVICE=cuda GROUP=10 TRANSPORT=ws". What it writes under OUT: machine.txt,
-# tests.log, learner.json, learner.md, and per layout NAME.tar.gz (its records, its services'
-# logs and the protocol's output, protocol.log): at most 8 files come back from the machine.
+# tests.log, learner.json, learner.md, rounding-drift.md, and per layout NAME.tar.gz (its
+# records, its services' logs and the protocol's output, protocol.log): at most 8 files come
+# back from the machine, so at most 3 layouts.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 out=$(realpath -m "$1")
@@ -43,6 +46,7 @@ cat "$out/machine.txt"
     tee "$out/tests.log"
 "$python" bench/learner.py --rounds 3 --steps 200 --json "$out/learner.json" 2>&1 |
     tee "$out/learner.md"
+"$python" bench/rounding_drift.py 2>&1 | tee "$out/rounding-drift.md"
 
 IFS=';' read -ra chosen <<<"$layouts"
 for layout in "${chosen[@]}"; do

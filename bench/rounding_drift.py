@@ -15,6 +15,7 @@ of 50 steps, the largest difference between the two paths' actions. Rows:
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -70,6 +71,7 @@ def drift(device: str, noise: float = 0.0) -> list[float]:
 
 def main() -> None:
     torch.set_num_threads(1)
+    os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # as the runner: deterministic
     rows = [("cpu", "cpu", 0.0), ("cpu + noise 6e-8", "cpu", 6e-8),
             ("cpu + noise 3e-7", "cpu", 3e-7)]
     if torch.cuda.is_available():
