@@ -33,7 +33,8 @@ mkdir -p "$out"
 export PYTHONUNBUFFERED=1
 {
     echo "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | xargs), $(nproc --all) cores"
-    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>&1 | sed 's/^/gpu: /'
+    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>&1 |
+        sed 's/^/gpu: /'
     "$python" -c 'import sys, numpy, torch; print("versions: python", sys.version.split()[0],
         "numpy", numpy.__version__, "torch", torch.__version__)'
     # the machine's copy of the history may predate the session's commits: say what differs
