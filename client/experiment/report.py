@@ -46,6 +46,34 @@ def by_hundred(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
     return rows
 
 
+LATE = 100  # the per-run table's late phase: each run's last LATE episodes
+
+
+def per_run(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
+    """Each run on its own, over all its episodes and its last ``LATE``: a run that the shield
+    keeps in a loop of braking shows here, where the pooled table averages it away."""
+    rows = []
+    for run in sorted({r.run for r in records}):
+        mine = sorted((r for r in records if r.run == run), key=lambda r: r.episode)
+        late = mine[-LATE:]
+        rows.append({
+            "run": run,
+            "seed": mine[0].seed,
+            "episodes": len(mine),
+            "successes": sum(r.outcome == "success" for r in mine),
+            "large_distance": sum(r.outcome == "large_distance" for r in mine),
+            "collision": sum(r.outcome == "collision" for r in mine),
+            "never_fails_after": max((r.episode for r in mine if r.outcome in FAILURES),
+                                     default=0),
+            "late_episodes": f"{late[0].episode}-{late[-1].episode}",
+            "late_success_rate": float(np.mean([r.outcome == "success" for r in late])),
+            "late_interventions_per_episode": float(np.mean(
+                [sum(r.interventions.values()) for r in late])),
+            "n_states": mine[-1].n_states,
+        })
+    return rows
+
+
 def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
     """Per arm: the table's counts, the episode after which each run never fails, speed
     differences over successful episodes, and interventions."""
@@ -54,10 +82,7 @@ def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
         by_arm[record.arm].append(record)
     summary: dict[str, Any] = {}
     for arm, records in by_arm.items():
-        runs = sorted({r.run for r in records})
-        last_failure = {run: max((r.episode for r in records
-                                  if r.run == run and r.outcome in FAILURES), default=0)
-                        for run in runs}
+        runs = per_run(records)
         successes = [r for r in records if r.outcome == "success"]
         mean, var = pooled(successes)
         interventions: dict[str, int] = defaultdict(int)
@@ -72,10 +97,11 @@ def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
             "success_rate": len(successes) / len(records),
             "large_distance": sum(r.outcome == "large_distance" for r in records),
             "collision": sum(r.outcome == "collision" for r in records),
-            "never_fails_after": max(last_failure.values()),
-            "never_fails_after_per_run": [last_failure[run] for run in runs],
-            "episodes_per_run": [sum(r.run == run for r in records) for run in runs],
+            "never_fails_after": max(run["never_fails_after"] for run in runs),
+            "never_fails_after_per_run": [run["never_fails_after"] for run in runs],
+            "episodes_per_run": [run["episodes"] for run in runs],
             "per_100_episodes": by_hundred(records),
+            "per_run": runs,
             "speed_difference_mean": mean,
             "speed_difference_variance": var,
             "interventions": dict(interventions),
@@ -116,6 +142,23 @@ def blocks_table(summary: dict[str, Any]) -> str:
             lines.append(f"| {arm} | {b['episodes']} | {100 * b['success_rate']:.1f}% "
                          f"| {b['large_distance']} | {b['collision']} "
                          f"| {b['interventions_per_episode']:.1f} |")
+    return "\n".join(lines)
+
+
+def runs_table(summary: dict[str, Any]) -> str:
+    """Each run's outcomes, its last episodes and its model's size at the end."""
+    lines = ["| arm | run | seed | episodes | success | large distance | collision | no failure "
+             "after episode | last episodes | success there | interventions per episode there "
+             "| states at the end |", "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|"]
+    for arm, s in summary.items():
+        for r in s["per_run"]:
+            states = r["n_states"] if "+" in arm else "-"
+            lines.append(f"| {arm} | {r['run']} | {r['seed']} | {r['episodes']} "
+                         f"| {r['successes']} ({100 * r['successes'] / r['episodes']:.1f}%) "
+                         f"| {r['large_distance']} | {r['collision']} "
+                         f"| {r['never_fails_after']} | {r['late_episodes']} "
+                         f"| {100 * r['late_success_rate']:.1f}% "
+                         f"| {r['late_interventions_per_episode']:.1f} | {states} |")
     return "\n".join(lines)
 
 
@@ -213,7 +256,8 @@ def write(directory: Path, limit: int | None = None) -> tuple[str, dict[str, Any
                    "versions": headers[0]["versions"], "episode_limit": limit}
     (directory / "summary.json").write_text(json.dumps(summary_doc, indent=2))
     text = f"{table(summary)}\n\nPer block of 100 episodes, all runs together:\n\n" \
-           f"{blocks_table(summary)}"
+           f"{blocks_table(summary)}\n\nPer run (its last {LATE} episodes on the right):\n\n" \
+           f"{runs_table(summary)}"
     (directory / "table.md").write_text(text + "\n")
     figure(episodes, directory / "figure.png")
     return text, summary

@@ -87,12 +87,23 @@ def test_summary_numbers_by_hand() -> None:
     assert s["speed_difference_variance"] == pytest.approx(second - mean**2)
     assert s["interventions"] == {"collision": 3}
     assert "| a | 2 | 6 | 3 (50.0%) | 1 | 2 | 3 |" in report.table({"a": s})
+    first, second = s["per_run"]
+    assert (first["successes"], first["large_distance"], first["collision"]) == (2, 0, 1)
+    assert (second["successes"], second["large_distance"], second["collision"]) == (1, 1, 1)
+    assert first["late_success_rate"] == pytest.approx(2 / 3)
+    assert second["late_interventions_per_episode"] == pytest.approx(1 / 3)
+    assert "| a | 1 | 1 | 3 | 1 (33.3%) | 1 | 1 | 3 | 1-3 | 33.3% | 0.3 | - |" in \
+        report.runs_table({"a": s})
     later = [record(0, 101, "success"), record(1, 101, "collision"), record(0, 250, "success")]
     blocks = report.summarise(rows + later)["a"]["per_100_episodes"]
     assert [b["episodes"] for b in blocks] == ["1-3", "101-101", "201-250"]
     assert [b["success_rate"] for b in blocks] == [0.5, 0.5, 1.0]
     assert [(b["large_distance"], b["collision"]) for b in blocks] == [(1, 2), (0, 1), (0, 0)]
     assert blocks[0]["interventions_per_episode"] == pytest.approx(3 / 6)
+    many = [record(0, e, "collision" if e == 7 else "success") for e in range(1, 151)]
+    [run] = report.summarise(many)["a"]["per_run"]
+    assert (run["late_episodes"], run["late_success_rate"]) == ("51-150", 1.0)
+    assert (run["episodes"], run["never_fails_after"]) == (150, 7)
 
 
 def test_report_writes_summary_table_and_figure(tmp_path: Path) -> None:
