@@ -19,11 +19,12 @@ import typer
 from tqdm import tqdm
 
 from app.core import ShieldConfig, ShieldError
-from client.experiment import report, runner
-from client.experiment.records import RecordError
+from client.experiment import checkpoint, report, runner
+from client.experiment.records import RecordError, read_all
 from client.experiment.trace import analyse as analyse_traces
 from client.shield import ShieldAPIError, ShieldClient, ShieldUnavailable
 
+CHECKPOINT_MINUTES = 10.0  # how often lockstep groups save their state by default
 cli = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help=__doc__)
 
@@ -36,8 +37,10 @@ def fail(message: str) -> NoReturn:
 def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, transport: str,
                out: Path, workers: int, token: str | None, lead: str,
                shield_config: str = "{}", lockstep: int = 0, trace: bool = False,
-               device: str = "cpu") -> str:
-    """Run, then report; every failure a user can cause becomes one line."""
+               device: str = "cpu", checkpoint_every: float | None = None,
+               deadline: float | None = None) -> str:
+    """Run, then report (or, stopped at ``deadline``, say how to go on); every failure a user
+    can cause becomes one line."""
     try:
         overrides = json.loads(shield_config)
         ShieldConfig.from_dict(overrides)  # refuse a bad configuration before any run starts
@@ -51,7 +54,14 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
                     probe.health()
         total = len(config.arms) * runs * episodes
         with tqdm(total=total, desc="episodes", unit="ep", disable=None) as bar:
-            runner.run_all(config, out, workers, token, bar, lockstep, trace, device)
+            runner.run_all(config, out, workers, token, bar, lockstep, trace, device,
+                           checkpoint_every, deadline)
+        if deadline is not None and runner.past(deadline):
+            done = len(read_all(out)[1])
+            if done < total:
+                return (f"stopped at the deadline with {done} of {total} episodes, "
+                        f"{len(checkpoint.pending(out))} group(s) checkpointed in "
+                        f"{out / checkpoint.DIRECTORY}; the same command goes on from there")
         text, _ = report.write(out)
     except ShieldError as error:
         fail(f"shield configuration: {error.field}: {error.message}")
@@ -93,10 +103,20 @@ def run(
     trace: Annotated[bool, typer.Option(
         help="Also write every decision of the shielded runs to OUT/traces (see 'trace').")]
     = False,
+    checkpoint_minutes: Annotated[float | None, typer.Option(
+        min=0, help="With --lockstep: save each group's state to OUT/checkpoints this often, "
+                    "to go on from there after a crash (default 10; 0: never).")] = None,
+    stop_after: Annotated[float | None, typer.Option(
+        min=0, help="With --lockstep: after this many minutes save each group's state and "
+                    "stop; the same command goes on from there.")] = None,
 ) -> None:
     """Run arms x runs x episodes (resumable: run it again to continue), then report."""
-    if not lockstep and (lockstep_runs is not None or device != "cpu"):
-        fail("--lockstep-runs and --device are options of --lockstep")
+    if not lockstep and (lockstep_runs is not None or device != "cpu"
+                         or checkpoint_minutes is not None or stop_after is not None):
+        fail("--lockstep-runs, --device, --checkpoint-minutes and --stop-after are options "
+             "of --lockstep")
+    if trace and (checkpoint_minutes or stop_after is not None):
+        fail("--trace: a traced experiment replays from the start, without checkpoints")
     if device not in ("cpu", "cuda"):
         fail(f"--device: cpu or cuda, not {device!r}")
     if device == "cuda":
@@ -105,9 +125,13 @@ def run(
         if not torch.cuda.is_available():
             fail("--device cuda: no CUDA device here")
     group = (lockstep_runs or runs) if lockstep else 0
+    minutes = CHECKPOINT_MINUTES if checkpoint_minutes is None else checkpoint_minutes
+    every = 60.0 * minutes if lockstep and minutes and not trace else None
+    deadline = None if stop_after is None else time.time() + 60.0 * stop_after
     typer.echo(experiment(arms, runs, episodes, seed, shield, transport, out, workers, token,
-                          lead, shield_config, group, trace, device))
-    typer.echo(f"\nrecords, summary.json, table.md and figure.png in {out}")
+                          lead, shield_config, group, trace, device, every, deadline))
+    if (out / "table.md").exists() and not checkpoint.pending(out):
+        typer.echo(f"\nrecords, summary.json, table.md and figure.png in {out}")
 
 
 @cli.command("report")

@@ -25,6 +25,13 @@
 #                   batch route per service, all in flight at once (default ws: a service
 #                   per run, as above)
 #
+#   STOP_AFTER=M   with LOCKSTEP=1: after M minutes every group saves its state in OUT/checkpoints
+#                  and stops; the same command goes on from there (gzipped records of runs
+#                  not finished are unpacked to go on). Groups also save every 10 minutes, so
+#                  a crash loses at most that much
+#   ARMS="..."     the arms to run (default "ddpg ddpg+shield")
+#   LOG_LEVEL=L    the services' log level (default warning; info logs every request)
+#
 # The two arms run as two `client run` commands side by side, so their groups can differ. On
 # 2 cores, LOCKSTEP=1 GROUP=10 TRANSPORT=batch: two shielded groups of 5 overlap one group's
 # learning with the other's wait for answers, but in two minutes of each here the shielded
@@ -58,7 +65,8 @@ trap 'kill "${pids[@]}" 2>/dev/null || true; wait' EXIT  # and wait: no service 
 urls=()
 for ((i = 0; i < services; i++)); do
     port=$((first_port + i))
-    "$PYTHON" -m app serve --host 127.0.0.1 --port "$port" >"$out/services/shield-$i.log" 2>&1 &
+    "$PYTHON" -m app serve --host 127.0.0.1 --port "$port" --log-level "${LOG_LEVEL:-warning}" \
+        >>"$out/services/shield-$i.log" 2>&1 &
     pids+=($!)
     urls+=("http://127.0.0.1:$port")
 done
@@ -74,6 +82,7 @@ done
 arm_options() {
     if [ -n "$lockstep" ]; then
         echo "--lockstep --lockstep-runs $1 --device $device --workers $(((runs + $1 - 1) / $1))"
+        [ -z "${STOP_AFTER:-}" ] || echo "--stop-after $STOP_AFTER"
     else
         echo "--workers $runs"
     fi
@@ -83,17 +92,17 @@ if [ -n "$lockstep" ]; then
 else
     how="every run in its own process on the CPU"
 fi
-{
-    echo "started: $(date -u +%FT%TZ)"
+{  # appended: a run that goes on from checkpoints adds its own lines
+    echo "started: $(date -u +%FT%TZ) (commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown))"
     echo "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | xargs), $(nproc --all) cores"
     if [ "$device" = cuda ]; then
         echo "gpu: $(nvidia-smi --query-gpu=name --format=csv,noheader | head -1)"
     fi
     echo "runs: $runs x $episodes episodes per arm; $how; $services shield service(s), $transport"
-} >"$out/machine.txt"
+} >>"$out/machine.txt"
 start=$(date +%s)
 arms=()
-for arm in ddpg ddpg+shield; do
+for arm in ${ARMS:-ddpg ddpg+shield}; do
     [ "$arm" = ddpg ] && size=$ddpg_group || size=$group
     # shellcheck disable=SC2046  # the options are words
     "$PYTHON" -m client run --arms "$arm" --runs "$runs" --episodes "$episodes" --seed 1000 \

@@ -11,13 +11,14 @@ requires.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 import torch
 from torch import nn
 
+MEMORY = ("obs", "next_obs", "action", "reward", "done")  # a transition's arrays
 OBS_SCALE = np.array([32.0, 200.0, 32.0, 2.0], dtype=np.float32)  # z-bar: Eq. 9 normalised
 A_MAX = 2.0  # [m/s^2]
 
@@ -79,6 +80,20 @@ class ReplayBuffer:
             self.reward[index]
         rows[:, 6:10], rows[:, 10:11] = self.next_obs[index], self.done[index]
 
+    def state(self) -> dict[str, Any]:
+        """The transitions held and where the generator stands: :meth:`restore` continues
+        exactly from here."""
+        held = min(self.count, self.size)
+        return {"count": self.count, "rng": self.rng.bit_generator.state,
+                **{name: getattr(self, name)[:held].copy() for name in MEMORY}}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        held = min(state["count"], self.size)
+        for name in MEMORY:
+            getattr(self, name)[:held] = state[name]
+        self.count = state["count"]
+        self.rng.bit_generator.state = state["rng"]
+
 
 class OrnsteinUhlenbeckNoise:
     """Temporally correlated exploration noise, from its own generator."""
@@ -95,6 +110,13 @@ class OrnsteinUhlenbeckNoise:
 
     def reset(self) -> None:
         self.x = 0.0
+
+    def state(self) -> dict[str, Any]:
+        return {"x": self.x, "rng": self.rng.bit_generator.state}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        self.x = state["x"]
+        self.rng.bit_generator.state = state["rng"]
 
 
 class Actor(nn.Module):

@@ -15,7 +15,9 @@ minutes on one GPU.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -111,6 +113,42 @@ class DDPGEnsemble:
         self.actor_target = rows(self.actor_target, False)
         self.critic_target = rows(self.critic_target, False)
         self.members = [self.members[i] for i in members]
+        self._prepare()
+
+    def state(self) -> dict[str, Any]:
+        """Everything the members have learned and drawn so far (networks, targets, Adam
+        moments, replay memories, exploration noise), on the CPU: :meth:`restore` on an
+        ensemble of the same members continues exactly from here."""
+        def cpu(params: Params) -> Params:
+            return [p.detach().cpu().clone() for p in params]
+
+        return {"actor": cpu(self.actor), "critic": cpu(self.critic),
+                "actor_target": cpu(self.actor_target), "critic_target": cpu(self.critic_target),
+                "actor_opt": copy.deepcopy(self.actor_opt.state_dict()),  # moments change in place
+                "critic_opt": copy.deepcopy(self.critic_opt.state_dict()),
+                "memories": [m.buffer.state() for m in self.members],
+                "noises": [m.noise.state() for m in self.members]}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state`."""
+        if len(state["memories"]) != len(self.members):
+            raise ValueError(f"a state of {len(state['memories'])} members, not "
+                             f"{len(self.members)}")
+
+        def placed(params: Params, grad: bool) -> Params:
+            return [p.to(self.device).requires_grad_(grad) for p in params]
+
+        self.actor, self.critic = placed(state["actor"], True), placed(state["critic"], True)
+        self.actor_target = placed(state["actor_target"], False)
+        self.critic_target = placed(state["critic_target"], False)
+        self.actor_opt = self._adam(self.actor, self.config.actor_lr)
+        self.actor_opt.load_state_dict(state["actor_opt"])
+        self.critic_opt = self._adam(self.critic, self.config.critic_lr)
+        self.critic_opt.load_state_dict(state["critic_opt"])
+        for member, memory, noise in zip(self.members, state["memories"], state["noises"],
+                                         strict=True):
+            member.buffer.restore(memory)
+            member.noise.restore(noise)
         self._prepare()
 
     def act(self, observations: npt.NDArray[np.float32], explore: bool = True) -> list[float]:

@@ -66,8 +66,17 @@ def start(path: Path, header: dict[str, Any]) -> list[EpisodeRecord]:
     An existing file must carry the same ``identity`` (the configuration less where the
     shield runs and how it is reached, which change no result) and, where both headers have
     it, the same resolved shield configuration (the overrides alone do not show a change of
-    the defaults), else :class:`RecordError`.
+    the defaults), else :class:`RecordError`. A run kept gzipped goes on plain: the file is
+    unpacked first.
     """
+    packed = path.with_name(path.name + ".gz")
+    if packed.exists() and (not path.exists() or path.stat().st_size == 0):
+        read(packed)  # a damaged archive is refused before anything changes
+        with open(path, "wb") as f:
+            f.write(gzip.decompress(packed.read_bytes()))
+            f.flush()
+            os.fsync(f.fileno())
+        packed.unlink()
     if not path.exists() or path.stat().st_size == 0:
         path.parent.mkdir(parents=True, exist_ok=True)
         with open(path, "w") as f:

@@ -3,7 +3,8 @@ with its own model (in-process, or on a shield service reached over HTTP, WebSoc
 
 Runs are deterministic for their seed, so an interrupted run is resumed by playing it again
 from the start: the episodes already recorded must come out identical (checked), and only the
-missing ones are appended.
+missing ones are appended. Lockstep groups also write checkpoints (:mod:`.checkpoint`) and
+continue from the latest instead of from the start.
 """
 
 from __future__ import annotations
@@ -33,9 +34,10 @@ from typing import IO, Any, Literal, Protocol
 import numpy as np
 
 import app
-from app.core import ShieldConfig
+from app.core import Shield, ShieldConfig
+from app.service import codec
 from client.agents.idm import PRESETS, RandomController
-from client.experiment import records
+from client.experiment import checkpoint, records
 from client.experiment.records import EpisodeRecord, RecordError
 from client.experiment.trace import TraceWriter
 from client.shield import BatchShield, LocalShield, ShieldClient, ShieldSession, StepShield
@@ -87,6 +89,11 @@ class ExperimentConfig:
         return {k: list(v) if isinstance(v, tuple) else v
                 for k, v in dataclasses.asdict(self).items()}
 
+    def identity(self) -> dict[str, Any]:
+        """What makes the results: everything but where the shield runs and how it is
+        reached."""
+        return {k: v for k, v in self.to_dict().items() if k not in ("shield", "transport")}
+
 
 def parse_arm(arm: str) -> tuple[str, str | None]:
     """``controller`` or ``controller+shield`` / ``controller+shadow``."""
@@ -135,21 +142,37 @@ def shield_config(config: ExperimentConfig, seed: int) -> ShieldConfig:
 
 
 def make_shield(config: ExperimentConfig, arm: str, run: int, seed: int,
-                token: str | None) -> StepShield:
-    """A fresh, empty model for this run."""
+                token: str | None, model: Any | None = None) -> StepShield:
+    """A fresh, empty model for this run, or the model ``model`` (the exact state that
+    :func:`model_state` gave)."""
     resolved = shield_config(config, seed)
     if config.shield == "local":
-        return LocalShield(resolved)
+        local = LocalShield(resolved)
+        if model is not None:
+            local.shield = Shield.from_snapshot(codec.from_json(model))
+        return local
     name, url = model_name(config, arm, run), config.shield_url(run)
     with ShieldClient(url, token=token) as admin:
-        if name in {m["name"] for m in admin.models()}:
-            admin.delete_model(name)
-        admin.create_model(name, resolved.to_dict())
+        if model is not None:
+            admin.restore(name, {"exact": model})
+        else:
+            if name in {m["name"] for m in admin.models()}:
+                admin.delete_model(name)
+            admin.create_model(name, resolved.to_dict())
     if config.transport == "http":
         return ShieldClient(url, token=token, model=name)
     if config.transport == "batch":
         return BatchShield(url, token=token, model=name)
     return ShieldSession(url, token=token, model=name)
+
+
+def model_state(config: ExperimentConfig, arm: str, run: int, shield: StepShield,
+                token: str | None) -> Any:
+    """The exact state of the run's model, as the service's snapshot gives it."""
+    if isinstance(shield, LocalShield):
+        return codec.to_json(shield.shield.snapshot())
+    with ShieldClient(config.shield_url(run), token=token) as admin:
+        return admin.snapshot(model_name(config, arm, run), tpm="none")["exact"]
 
 
 class EpisodeMeter:
@@ -225,21 +248,22 @@ class Run:
     env: Any
     shield: StepShield | None
     claim: IO[bytes]
+    token: str | None = None
     appended: int = 0
     trace: TraceWriter | None = None
 
     @classmethod
     def open(cls, config: ExperimentConfig, arm: str, index: int, out: Path,
              token: str | None, wrap: bool = True, trace: bool = False,
-             learning: dict[str, Any] | None = None) -> Run:
+             learning: dict[str, Any] | None = None, model: Any | None = None) -> Run:
         """Open the run's records and environment; ``wrap=False`` leaves the shield (if any)
         to the caller instead of putting it in front of the environment; with ``trace`` a
         shielded run also writes its step trace. ``learning`` says how the learner ran
-        (lockstep, device) for the header: it rounds differently, changes no configuration."""
+        (lockstep, device) for the header: it rounds differently, changes no configuration.
+        ``model`` is the shield model to go on with (from a checkpoint), else a fresh one."""
         seed = run_seeds(config.seed, config.runs)[index]
         path = records.path_for(out, arm, index)
-        identity = {k: v for k, v in config.to_dict().items()
-                    if k not in ("shield", "transport")}
+        identity = config.identity()
         _, mode = parse_arm(arm)
         header = {"config": config.to_dict(), "identity": identity, "arm": arm, "run": index,
                   "seed": seed, "versions": versions(),
@@ -251,15 +275,16 @@ class Run:
             env: Any = CarFollowingEnv(lead=profiles(config.lead),
                                        reward=RewardConfig(**config.reward))
             shield = None
-            if mode and len(recorded) < config.episodes:
-                shield = make_shield(config, arm, index, seed, token)
+            if mode and (len(recorded) < config.episodes or model is not None):
+                shield = make_shield(config, arm, index, seed, token, model)
                 if wrap:
                     env = ShieldWrapper(env, shield, shadow=mode == "shadow")
         except BaseException:
             claim.close()
             raise
         writer = TraceWriter(out, arm, index) if trace and shield is not None else None
-        return cls(config, arm, index, seed, path, recorded, env, shield, claim, trace=writer)
+        return cls(config, arm, index, seed, path, recorded, env, shield, claim, token,
+                   trace=writer)
 
     @property
     def complete(self) -> bool:
@@ -335,89 +360,157 @@ def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str 
     return state.appended
 
 
+@dataclass
+class Place:
+    """Where a lockstep run stands: its episode, what that episode did so far, and its last
+    observations (the controller's and the e-FSM's)."""
+
+    episode: int
+    meter: EpisodeMeter
+    started: float
+    obs: Any
+    z: Any
+
+    @classmethod
+    def start(cls, run: Run) -> Place:
+        obs, info = run.env.reset(seed=run.seed)
+        return cls(1, EpisodeMeter(), time.perf_counter(), obs, info["efsm_observation"])
+
+    def state(self, run: Run) -> dict[str, Any]:
+        """The place with the simulator's state and the shield model's, for a checkpoint."""
+        _, mode = parse_arm(run.arm)
+        return {"episode": self.episode, "meter": self.meter, "obs": self.obs, "z": self.z,
+                "elapsed": time.perf_counter() - self.started, "env": run.env.state(),
+                "model": model_state(run.config, run.arm, run.index, run.shield, run.token)
+                if mode and run.shield is not None else None}
+
+    @classmethod
+    def restore(cls, run: Run, state: dict[str, Any]) -> Place:
+        run.env.restore(state["env"])
+        return cls(state["episode"], state["meter"], time.perf_counter() - state["elapsed"],
+                   state["obs"], state["z"])
+
+
+def past(deadline: float) -> bool:
+    """Whether the wall clock has passed ``deadline`` (seconds since the epoch)."""
+    return time.time() >= deadline
+
+
 def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | None = None,
                  progress: Any | None = None, trace: bool = False,
-                 indices: Sequence[int] | None = None, device: str = "cpu") -> int:
+                 indices: Sequence[int] | None = None, device: str = "cpu",
+                 checkpoint_every: float | None = None,
+                 stop: Callable[[], bool] | None = None) -> int:
     """The runs of a DDPG arm (all, or those ``indices``) in one process, stepping together: one
     batched DDPG update for all runs per step (:class:`~client.agents.ensemble.DDPGEnsemble`,
     on ``device``), and one round of shield requests per step: with the batch transport one
     request carrying a step of every run's model, over WebSocket every run's step sent before
     any reply is read. Each run sees the same sequence as :func:`run_one` (act, shield, step,
-    remember, update); results agree within the rounding of batched arithmetic."""
+    remember, update); results agree within the rounding of batched arithmetic.
+
+    The group saves a checkpoint every ``checkpoint_every`` seconds, and when ``stop`` (asked
+    after every step) says to stop, before returning; a group with a checkpoint continues from
+    it. Returns the number of episodes appended."""
     from client.agents.ddpg import DDPGConfig
     from client.agents.ensemble import DDPGEnsemble
 
     controller, mode = parse_arm(arm)
     if controller != "ddpg":
         raise ValueError(f"lockstep training is for DDPG arms, not {arm!r}")
+    if trace and (checkpoint_every is not None or stop is not None):
+        raise ValueError("a traced experiment replays from the start: no checkpoints")
+    if stop is not None and stop():
+        return 0
     if device.startswith("cuda"):  # cuBLAS is deterministic only with a fixed workspace
         os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
     _torch_for_one_core()
     learning = {"lockstep": True, "device": device}
+    group = list(range(config.runs) if indices is None else indices)
+    saved_at = checkpoint.path_for(out, arm, group)
+    identity = {**config.identity(), "arm": arm, "group": group, "learning": learning}
+    saved = checkpoint.load(saved_at, identity)
     runs = []
-    for i in range(config.runs) if indices is None else indices:
-        run = Run.open(config, arm, i, out, token, wrap=False, trace=trace, learning=learning)
-        if run.complete:
+    for i in group if saved is None else saved["active"]:
+        model = None if saved is None else saved["places"][i]["model"]
+        run = Run.open(config, arm, i, out, token, wrap=False, trace=trace, learning=learning,
+                       model=model)
+        if run.complete and saved is None:
             run.close()
-        else:
+        else:  # a run of a checkpoint is played on: the members' arithmetic is batched
             runs.append(run)
     if not runs:
         return 0
     shield = Lockstep(runs, config, arm, shadow=mode == "shadow") if mode else None
     learner = DDPGEnsemble(DDPGConfig(**config.ddpg), [r.seed for r in runs], device)
-    obs, z = [], []
-    for r in runs:
-        first, info = r.env.reset(seed=r.seed)
-        obs.append(first)
-        z.append(info["efsm_observation"])
-    episode = [1] * len(runs)
-    meters = [EpisodeMeter() for _ in runs]
-    started = [time.perf_counter()] * len(runs)
+    if saved is None:
+        places = [Place.start(r) for r in runs]
+        for member in learner.members:
+            member.noise.reset()
+    else:
+        places = [Place.restore(r, saved["places"][r.index]) for r in runs]
+        learner.restore(saved["learner"])
     active = list(range(len(runs)))
-    for member in learner.members:
-        member.noise.reset()
+
+    def save() -> None:
+        if shield:
+            shield.send_closing()
+        checkpoint.save(saved_at, identity, {
+            "active": [runs[k].index for k in active], "learner": learner.state(),
+            "places": {runs[k].index: places[k].state(runs[k]) for k in active}})
+
+    next_save = time.monotonic() + (checkpoint_every or 0.0)
     proposals = [0.0] * len(runs)
     try:
         while active:  # learner member j is run active[j]
-            for k, a in zip(active, learner.act(np.stack([obs[k] for k in active])),
+            for k, a in zip(active, learner.act(np.stack([places[k].obs for k in active])),
                             strict=True):
                 proposals[k] = a
-            decisions = shield.decide(active, z, proposals) if shield else [None] * len(active)
+            decisions = shield.decide(active, [p.z for p in places], proposals) \
+                if shield else [None] * len(active)
             going = list(active)
             for j, (k, decision) in enumerate(zip(list(active), decisions, strict=True)):
+                place = places[k]
                 action = proposals[k] if decision is None else float(decision.action)
                 next_obs, reward, terminated, truncated, info = runs[k].env.step(
                     np.array([action], np.float32))
                 if decision is not None:
-                    info["shield"], info["shield_observation"] = decision, z[k]
-                recorder = runs[k].recorder(episode[k])
+                    info["shield"], info["shield_observation"] = decision, place.z
+                recorder = runs[k].recorder(place.episode)
                 if recorder is not None:
                     recorder(proposals[k], info)
-                executed = meters[k].add(proposals[k], reward, info)
-                learner.members[j].remember(obs[k], executed, reward, next_obs, terminated)
-                obs[k], z[k] = next_obs, info["efsm_observation"]
+                executed = place.meter.add(proposals[k], reward, info)
+                learner.members[j].remember(place.obs, executed, reward, next_obs, terminated)
+                place.obs, place.z = next_obs, info["efsm_observation"]
                 if terminated or truncated:
-                    finish = _finisher(runs[k], episode[k], meters[k], info, started[k],
-                                       progress)
+                    finish = _finisher(runs[k], place.episode, place.meter, info,
+                                       place.started, progress)
                     if shield:  # the record waits for the closing decision's state count
-                        shield.close_episode(k, z[k], info["event"], finish)
+                        shield.close_episode(k, place.z, info["event"], finish)
                     else:
                         finish(None)
-                    episode[k] += 1
-                    if episode[k] > config.episodes:
+                    place.episode += 1
+                    if place.episode > config.episodes:
                         going.remove(k)
                         continue
-                    obs[k], reset_info = runs[k].env.reset()
-                    z[k] = reset_info["efsm_observation"]
-                    meters[k], started[k] = EpisodeMeter(), time.perf_counter()
+                    place.obs, reset_info = runs[k].env.reset()
+                    place.z = reset_info["efsm_observation"]
+                    place.meter, place.started = EpisodeMeter(), time.perf_counter()
                     learner.members[j].noise.reset()
             learner.update()
             if len(going) < len(active):  # finished runs learn no more: drop their learners
                 if going:
                     learner.keep([active.index(k) for k in going])
                 active = going
+            if active and checkpoint_every is not None and time.monotonic() >= next_save:
+                save()
+                next_save = time.monotonic() + checkpoint_every
+            if active and stop is not None and stop():
+                save()
+                break
         if shield:
             shield.flush()
+        if not active:
+            checkpoint.remove(saved_at)
     finally:
         for r in runs:
             r.close()
@@ -476,11 +569,15 @@ class Lockstep:
         self.closing = []
         return answered
 
+    def send_closing(self) -> None:
+        """Send the queued episode ends now: each model still sees its own steps in order."""
+        if self.closing:
+            self.decide([], [], [])
+
     def flush(self) -> None:
         """Send the episode ends still queued when the runs are over, and let the threads of
         the batch requests go."""
-        if self.closing:
-            self.decide([], [], [])
+        self.send_closing()
         if self.pool is not None:
             self.pool.shutdown()
 
@@ -525,18 +622,25 @@ def _die_with_parent(parent: int) -> None:
 
 def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None = None,
             bar: Any | None = None, lockstep: int = 0, trace: bool = False,
-            device: str = "cpu") -> int:
+            device: str = "cpu", checkpoint_every: float | None = None,
+            deadline: float | None = None) -> int:
     """Every (arm, run) in its own process, at most ``workers`` at a time. With ``lockstep``
     N > 0 the runs of each DDPG arm go N to a process, each group with one batched update on
-    ``device``; with ``trace`` shielded runs write step traces."""
+    ``device``, saving a checkpoint every ``checkpoint_every`` seconds and stopping (with one)
+    at ``deadline`` (seconds since the epoch); with ``trace`` shielded runs write step
+    traces."""
     if device != "cpu" and not lockstep:
         raise ValueError(f"learning on {device!r} is for lockstep runs (--lockstep)")
+    if (checkpoint_every is not None or deadline is not None) and not lockstep:
+        raise ValueError("checkpoints are written by lockstep runs (--lockstep)")
+    stop = None if deadline is None else partial(past, deadline)
     jobs: list[tuple[Callable[..., int], tuple[Any, ...]]] = []
     for arm in config.arms:
         if lockstep and parse_arm(arm)[0] == "ddpg":
             for first in range(0, config.runs, lockstep):
                 group = list(range(first, min(first + lockstep, config.runs)))
-                jobs.append((partial(run_lockstep, indices=group, device=device),
+                jobs.append((partial(run_lockstep, indices=group, device=device,
+                                     checkpoint_every=checkpoint_every, stop=stop),
                              (config, arm, out, token)))
         else:
             jobs.extend((run_one, (config, arm, run, out, token)) for run in range(config.runs))

@@ -140,6 +140,19 @@ class CarFollowingEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]])
         truncated = not terminated and self._t >= MAX_STEPS
         return self._observation(), reward, terminated, truncated, self._info(event)
 
+    def state(self) -> dict[str, Any]:
+        """Where the episode stands and where the generator is: :meth:`restore` continues
+        the episode (and the episodes after it) exactly."""
+        return {"profile": self._profile.copy(), "t": self._t, "headway": self._headway,
+                "v_ego": self._v_ego, "v_lead": self._v_lead, "a_prev": self._a_prev,
+                "rng": self.np_random.bit_generator.state}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        self._profile = np.array(state["profile"])
+        self._t, self._headway = state["t"], state["headway"]
+        self._v_ego, self._v_lead, self._a_prev = state["v_ego"], state["v_lead"], state["a_prev"]
+        self.np_random.bit_generator.state = state["rng"]
+
     def _reward(self, a: float) -> float:
         cfg = self.reward_config
         target = (cfg.headway_const * cfg.d_safe if cfg.form == "as_written"

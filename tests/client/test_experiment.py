@@ -150,6 +150,26 @@ def test_gzipped_records_report_the_same(tmp_path: Path) -> None:
         records.read_all(packed)
 
 
+def test_a_gzipped_run_goes_on_unpacked(tmp_path: Path) -> None:
+    """Committed partial results are gzipped; running the experiment again unpacks the run and
+    goes on, replaying what was recorded (a damaged archive is refused, untouched)."""
+    whole, packed = tmp_path / "whole", tmp_path / "packed"
+    arm = "idm-aggressive+shield"
+    runner.run_one(CONFIG, arm, 0, whole)
+    source = records.path_for(whole, arm, 0)
+    archive = records.path_for(packed, arm, 0).with_suffix(".jsonl.gz")
+    archive.parent.mkdir(parents=True)
+    archive.write_bytes(b"\x1f\x8b not really gzip")
+    with pytest.raises(records.RecordError, match="damaged|gzip"):
+        runner.run_one(CONFIG, arm, 0, packed)
+    assert archive.exists()
+    archive.write_bytes(gzip.compress(b"".join(source.read_bytes().splitlines(True)[:4])))
+    assert runner.run_one(CONFIG, arm, 0, packed) == CONFIG.episodes - 3
+    assert not archive.exists()
+    assert without_wall(records.read(records.path_for(packed, arm, 0))[1]) == \
+        without_wall(records.read(source)[1])
+
+
 def test_report_of_each_runs_first_episodes(tmp_path: Path) -> None:
     """Runs stopped at different points are compared over the episodes all of them reached."""
     runner.run_one(CONFIG, "idm-aggressive", 0, tmp_path)
@@ -306,7 +326,7 @@ def test_the_paper_protocol_script_runs_every_shielded_run_on_its_own_service(
     root = Path(__file__).resolve().parents[2]
     port = free_port()
     env = {**os.environ, "RUNS": "2", "EPISODES": "2", "PORT": str(port),
-           "PYTHON": sys.executable}
+           "PYTHON": sys.executable, "LOG_LEVEL": "info"}  # info: every request logged
     result = subprocess.run(["bash", str(root / "results/paper-protocol.sh"), str(tmp_path)],
                             env=env, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
@@ -332,7 +352,7 @@ def test_the_paper_protocol_script_trains_in_lockstep_groups_against_batch_servi
     port = free_port()
     env = {**os.environ, "RUNS": "3", "EPISODES": "2", "PORT": str(port),
            "PYTHON": sys.executable, "LOCKSTEP": "1", "GROUP": "2", "DDPG_GROUP": "3",
-           "TRANSPORT": "batch", "SERVICES": "2"}
+           "TRANSPORT": "batch", "SERVICES": "2", "LOG_LEVEL": "info"}
     result = subprocess.run(["bash", str(root / "results/paper-protocol.sh"), str(tmp_path)],
                             env=env, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
