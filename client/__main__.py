@@ -57,7 +57,8 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
             runner.run_all(config, out, workers, token, bar, lockstep, trace, device,
                            checkpoint_every, deadline)
         if deadline is not None and runner.past(deadline):
-            done = len(read_all(out)[1])
+            started = any((out / "records").glob("*.jsonl*"))
+            done = len(read_all(out)[1]) if started else 0
             if done < total:
                 return (f"stopped at the deadline with {done} of {total} episodes, "
                         f"{len(checkpoint.pending(out))} group(s) checkpointed in "

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
+import gzip
+import json
 import multiprocessing
 import os
 import platform
@@ -310,6 +312,19 @@ class Run:
         """The step recorder of ``episode`` when the run is traced."""
         return None if self.trace is None else self.trace.recorder(episode)
 
+    def keep_model(self) -> None:
+        """Write the run's shield model as it stands to ``OUT/models/`` (gzipped, the body that
+        PUT /models/{name} takes), so that what the run learned outlives the process or the
+        service that held it."""
+        if self.shield is None:
+            return
+        model = model_state(self.config, self.arm, self.index, self.shield, self.token)
+        path = self.path.parent.parent / "models" / f"{self.path.stem}.json.gz"
+        path.parent.mkdir(exist_ok=True)
+        partial = path.with_suffix(".partial")
+        partial.write_bytes(gzip.compress(json.dumps({"exact": model}).encode(), mtime=0))
+        partial.replace(path)
+
     def close(self) -> None:
         """Release the shield, the trace and the run's file."""
         if self.shield is not None:
@@ -328,7 +343,8 @@ def _torch_for_one_core() -> None:
 
 def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str | None = None,
             progress: Any | None = None, trace: bool = False) -> int:
-    """Play one run to ``config.episodes``; returns the number of episodes appended."""
+    """Play one run to ``config.episodes`` and keep its shield model (:meth:`Run.keep_model`);
+    returns the number of episodes appended."""
     _torch_for_one_core()
     state = Run.open(config, arm, run, out, token, trace=trace)
     if state.complete:
@@ -355,6 +371,7 @@ def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str 
             measured, obs = play(state.env, agent, obs, learner, state.recorder(episode))
             state.finish(episode, measured, time.perf_counter() - start, progress)
             obs, _ = state.env.reset()
+        state.keep_model()
     finally:
         state.close()
     return state.appended
@@ -410,7 +427,8 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
 
     The group saves a checkpoint every ``checkpoint_every`` seconds, and when ``stop`` (asked
     after every step) says to stop, before returning; a group with a checkpoint continues from
-    it. Returns the number of episodes appended."""
+    it. Done or stopped, the runs keep their shield models (:meth:`Run.keep_model`). Returns
+    the number of episodes appended."""
     from client.agents.ddpg import DDPGConfig
     from client.agents.ensemble import DDPGEnsemble
 
@@ -509,6 +527,8 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
                 break
         if shield:
             shield.flush()
+            for r in runs:
+                r.keep_model()
         if not active:
             checkpoint.remove(saved_at)
     finally:

@@ -4,6 +4,8 @@ exactly what an uninterrupted group records."""
 from __future__ import annotations
 
 import dataclasses
+import gzip
+import json
 import subprocess
 import sys
 from collections.abc import Callable
@@ -12,6 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from app.core import Shield
+from app.service import codec
 from client.agents.ddpg import DDPGConfig
 from client.agents.ensemble import DDPGEnsemble
 from client.experiment import checkpoint, records, runner
@@ -24,6 +28,10 @@ CONFIG = runner.ExperimentConfig(
     arms=(ARM,), runs=3, episodes=5, seed=7, lead="synthetic",
     ddpg={"warmup": 64, "buffer_size": 5000},
     shield_config={"reviser": {"activate_after_episodes": 2}})
+
+
+IDENTITY = {**CONFIG.identity(), "arm": ARM, "group": [0, 1, 2],
+            "learning": {"lockstep": True, "device": "cpu"}}
 
 
 def recorded(directory: Path, config: runner.ExperimentConfig = CONFIG) -> list[EpisodeRecord]:
@@ -119,14 +127,25 @@ def test_a_crashed_group_goes_on_from_its_last_checkpoint(
 
     with pytest.raises(Crash):
         runner.run_lockstep(CONFIG, ARM, tmp_path, checkpoint_every=0.3, stop=crash_after(800))
-    saved = checkpoint.load(checkpoint.pending(tmp_path)[0],
-                            {**CONFIG.identity(), "arm": ARM, "group": [0, 1, 2],
-                             "learning": {"lockstep": True, "device": "cpu"}})
+    saved = checkpoint.load(checkpoint.pending(tmp_path)[0], IDENTITY)
     assert saved is not None
     before = len(recorded(tmp_path))
     assert runner.run_lockstep(CONFIG, ARM, tmp_path) == len(uninterrupted) - before
     assert recorded(tmp_path) == uninterrupted
     assert not checkpoint.pending(tmp_path)  # done: removed
+
+
+def test_a_stopped_group_keeps_the_models_of_its_checkpoint(tmp_path: Path) -> None:
+    """OUT/models holds each run's model where the group stopped: the checkpoint's, in the
+    form PUT /models/{name} takes."""
+    runner.run_lockstep(CONFIG, ARM, tmp_path, stop=after(300))
+    saved = checkpoint.load(checkpoint.pending(tmp_path)[0], IDENTITY)
+    assert saved is not None
+    for run in range(CONFIG.runs):
+        kept = json.loads(gzip.decompress(
+            (tmp_path / "models" / f"ddpg_shield__run{run:02d}.json.gz").read_bytes()))
+        assert kept == {"exact": json.loads(json.dumps(saved["places"][run]["model"]))}
+        assert Shield.from_snapshot(codec.from_json(kept["exact"])).n_states > 0
 
 
 def test_a_checkpoint_of_another_experiment_is_refused(tmp_path: Path) -> None:

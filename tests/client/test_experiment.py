@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 import torch
 
+from app.core import Shield
+from app.service import codec
 from client.agents.ddpg import DDPG, DDPGConfig
 from client.experiment import records, report, runner, trace
 from client.experiment.records import EpisodeRecord
@@ -148,6 +150,19 @@ def test_gzipped_records_report_the_same(tmp_path: Path) -> None:
     (packed / "records" / (source.name + ".gz")).write_bytes(b"\x1f\x8b not really gzip")
     with pytest.raises(records.RecordError, match="damaged|gzip"):
         records.read_all(packed)
+
+
+def test_a_finished_run_keeps_its_shield_model(tmp_path: Path) -> None:
+    """A local shield's model outlives the run: OUT/models holds it as PUT /models/{name}
+    takes it, with the state count the last episode recorded."""
+    arm = "idm-aggressive+shield"
+    runner.run_one(CONFIG, arm, 0, tmp_path)
+    kept = json.loads(gzip.decompress(
+        (tmp_path / "models" / "idm-aggressive_shield__run00.json.gz").read_bytes()))
+    model = Shield.from_snapshot(codec.from_json(kept["exact"]))
+    last = records.read(records.path_for(tmp_path, arm, 0))[1][-1]
+    assert model.n_states == last.n_states > 0
+    assert model.counters.episodes == CONFIG.episodes
 
 
 def test_a_gzipped_run_goes_on_unpacked(tmp_path: Path) -> None:
