@@ -58,7 +58,7 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
                            checkpoint_every, deadline)
         if deadline is not None and runner.past(deadline):
             started = any((out / "records").glob("*.jsonl*"))
-            done = len(read_all(out)[1]) if started else 0
+            done = sum(r.arm in config.arms for r in read_all(out)[1]) if started else 0
             if done < total:
                 return (f"stopped at the deadline with {done} of {total} episodes, "
                         f"{len(checkpoint.pending(out))} group(s) checkpointed in "

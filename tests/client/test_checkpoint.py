@@ -176,6 +176,13 @@ def test_the_command_stops_at_its_deadline_and_goes_on(tmp_path: Path) -> None:
     command = [sys.executable, "-m", "client", "run", "--arms", ARM, "--runs", "2",
                "--episodes", "40", "--seed", "7", "--lead", "synthetic", "--lockstep",
                "--workers", "1", "--out", str(tmp_path)]
+    other = records.path_for(tmp_path, "idm", 0)  # another arm, finished: not counted
+    records.start(other, {"identity": "an arm run before"})
+    for episode in range(1, 101):
+        records.append(other, EpisodeRecord(
+            arm="idm", run=0, episode=episode, seed=1, steps=800, outcome="success",
+            interventions={}, revisions_would=0, speed_diff_n=800, speed_diff_mean=0.1,
+            speed_diff_var=0.1, episode_return=-1.0, n_states=0, wall_s=0.1))
     first = subprocess.run([*command, "--stop-after", "0.06"], capture_output=True, text=True,
                            timeout=600)
     assert first.returncode == 0, first.stderr
