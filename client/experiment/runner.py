@@ -395,11 +395,10 @@ class Place:
 
     def state(self, run: Run) -> dict[str, Any]:
         """The place with the simulator's state and the shield model's, for a checkpoint."""
-        _, mode = parse_arm(run.arm)
         return {"episode": self.episode, "meter": self.meter, "obs": self.obs, "z": self.z,
                 "elapsed": time.perf_counter() - self.started, "env": run.env.state(),
-                "model": model_state(run.config, run.arm, run.index, run.shield, run.token)
-                if mode and run.shield is not None else None}
+                "model": None if run.shield is None else
+                model_state(run.config, run.arm, run.index, run.shield, run.token)}
 
     @classmethod
     def restore(cls, run: Run, state: dict[str, Any]) -> Place:
