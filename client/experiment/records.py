@@ -60,6 +60,14 @@ def claim(path: Path) -> IO[bytes]:
     return handle
 
 
+def release(handle: IO[bytes], path: Path) -> None:
+    """Give up a claim before the run began: a file the claim left empty goes too, so that a
+    refused run leaves its folder as it was."""
+    if path.exists() and path.stat().st_size == 0:
+        path.unlink()
+    handle.close()
+
+
 def start(path: Path, header: dict[str, Any]) -> list[EpisodeRecord]:
     """Open a run's file: create it with the header, or read the episodes it already holds.
 

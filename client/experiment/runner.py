@@ -282,7 +282,7 @@ class Run:
                 if wrap:
                     env = ShieldWrapper(env, shield, shadow=mode == "shadow")
         except BaseException:
-            claim.close()
+            records.release(claim, path)
             raise
         writer = TraceWriter(out, arm, index) if trace and shield is not None else None
         return cls(config, arm, index, seed, path, recorded, env, shield, claim, token,
