@@ -60,9 +60,11 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
             started = any((out / "records").glob("*.jsonl*"))
             done = sum(r.arm in config.arms for r in read_all(out)[1]) if started else 0
             if done < total:
-                return (f"stopped at the deadline with {done} of {total} episodes, "
-                        f"{len(checkpoint.pending(out))} group(s) checkpointed in "
-                        f"{out / checkpoint.DIRECTORY}; the same command goes on from there")
+                groups = len(checkpoint.pending(out))
+                saved = (f", {groups} group(s) checkpointed in {out / checkpoint.DIRECTORY}"
+                         if groups else "")
+                return (f"stopped at the deadline with {done} of {total} episodes{saved}; "
+                        f"the same command goes on from there")
         text, _ = report.write(out)
     except ShieldError as error:
         fail(f"shield configuration: {error.field}: {error.message}")
@@ -108,14 +110,13 @@ def run(
         min=0, help="With --lockstep: save each group's state to OUT/checkpoints this often, "
                     "to go on from there after a crash (default 10; 0: never).")] = None,
     stop_after: Annotated[float | None, typer.Option(
-        min=0, help="With --lockstep: after this many minutes save each group's state and "
-                    "stop; the same command goes on from there.")] = None,
+        min=0, help="Stop after this many minutes: lockstep groups save their state, other "
+                    "runs finish their episode; the same command goes on from there.")] = None,
 ) -> None:
     """Run arms x runs x episodes (resumable: run it again to continue), then report."""
     if not lockstep and (lockstep_runs is not None or device != "cpu"
-                         or checkpoint_minutes is not None or stop_after is not None):
-        fail("--lockstep-runs, --device, --checkpoint-minutes and --stop-after are options "
-             "of --lockstep")
+                         or checkpoint_minutes is not None):
+        fail("--lockstep-runs, --device and --checkpoint-minutes are options of --lockstep")
     if trace and (checkpoint_minutes or stop_after is not None):
         fail("--trace: a traced experiment replays from the start, without checkpoints")
     if device not in ("cpu", "cuda"):

@@ -342,9 +342,11 @@ def _torch_for_one_core() -> None:
 
 
 def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str | None = None,
-            progress: Any | None = None, trace: bool = False) -> int:
-    """Play one run to ``config.episodes`` and keep its shield model (:meth:`Run.keep_model`);
-    returns the number of episodes appended."""
+            progress: Any | None = None, trace: bool = False,
+            stop: Callable[[], bool] | None = None) -> int:
+    """Play one run to ``config.episodes``, or until ``stop`` (asked after every episode) says
+    to stop, and keep its shield model (:meth:`Run.keep_model`); returns the number of
+    episodes appended. A stopped run goes on by replaying what it recorded."""
     _torch_for_one_core()
     state = Run.open(config, arm, run, out, token, trace=trace)
     if state.complete:
@@ -370,6 +372,8 @@ def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str 
                 learner.noise.reset()
             measured, obs = play(state.env, agent, obs, learner, state.recorder(episode))
             state.finish(episode, measured, time.perf_counter() - start, progress)
+            if stop is not None and stop():
+                break
             obs, _ = state.env.reset()
         state.keep_model()
     finally:
@@ -646,11 +650,11 @@ def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None
     """Every (arm, run) in its own process, at most ``workers`` at a time. With ``lockstep``
     N > 0 the runs of each DDPG arm go N to a process, each group with one batched update on
     ``device``, saving a checkpoint every ``checkpoint_every`` seconds and stopping (with one)
-    at ``deadline`` (seconds since the epoch); with ``trace`` shielded runs write step
-    traces."""
+    at ``deadline`` (seconds since the epoch); other runs stop at the deadline after their
+    episode. With ``trace`` shielded runs write step traces."""
     if device != "cpu" and not lockstep:
         raise ValueError(f"learning on {device!r} is for lockstep runs (--lockstep)")
-    if (checkpoint_every is not None or deadline is not None) and not lockstep:
+    if checkpoint_every is not None and not lockstep:
         raise ValueError("checkpoints are written by lockstep runs (--lockstep)")
     stop = None if deadline is None else partial(past, deadline)
     jobs: list[tuple[Callable[..., int], tuple[Any, ...]]] = []
@@ -662,7 +666,8 @@ def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None
                                      checkpoint_every=checkpoint_every, stop=stop),
                              (config, arm, out, token)))
         else:
-            jobs.extend((run_one, (config, arm, run, out, token)) for run in range(config.runs))
+            jobs.extend((partial(run_one, stop=stop), (config, arm, run, out, token))
+                        for run in range(config.runs))
     context = multiprocessing.get_context("spawn")
     with context.Manager() as manager, ProcessPoolExecutor(
             workers, mp_context=context, initializer=_die_with_parent,

@@ -165,6 +165,23 @@ def test_a_finished_run_keeps_its_shield_model(tmp_path: Path) -> None:
     assert model.counters.episodes == CONFIG.episodes
 
 
+def test_a_stopped_run_goes_on_by_replaying(tmp_path: Path) -> None:
+    """A run outside a lockstep group stops after the episode in which its stop says so, keeps
+    its model there, and the same call later records what an unstopped run records."""
+    whole, stopped = tmp_path / "whole", tmp_path / "stopped"
+    arm = "idm-aggressive+shield"
+    runner.run_one(CONFIG, arm, 0, whole)
+    asked = iter(range(3))
+    assert runner.run_one(CONFIG, arm, 0, stopped,
+                          stop=lambda: next(asked, None) is None) == 4
+    kept = json.loads(gzip.decompress(
+        (stopped / "models" / "idm-aggressive_shield__run00.json.gz").read_bytes()))
+    assert codec.from_json(kept["exact"])["counters"]["episodes"] == 4
+    assert runner.run_one(CONFIG, arm, 0, stopped) == CONFIG.episodes - 4
+    assert without_wall(records.read(records.path_for(stopped, arm, 0))[1]) == \
+        without_wall(records.read(records.path_for(whole, arm, 0))[1])
+
+
 def test_a_gzipped_run_goes_on_unpacked(tmp_path: Path) -> None:
     """Committed partial results are gzipped; running the experiment again unpacks the run and
     goes on, replaying what was recorded (a damaged archive is refused, untouched)."""
@@ -248,9 +265,23 @@ def test_lockstep_command(tmp_path: Path) -> None:
     assert "| ddpg | 3 | 6 |" in result.stdout and "| idm | 3 | 6 |" in result.stdout
 
 
+def test_the_command_stops_runs_outside_lockstep_at_its_deadline(tmp_path: Path) -> None:
+    command = ("run", "--arms", "idm", "--runs", "2", "--episodes", "30", "--lead",
+               "synthetic", "--workers", "1", "--out", str(tmp_path))
+    first = cli(*command, "--stop-after", "0")
+    assert first.returncode == 0, first.stderr
+    assert "stopped at the deadline with 2 of 60 episodes; the same command goes on" \
+        in first.stdout
+    assert not (tmp_path / "table.md").exists()
+    then = cli(*command)
+    assert then.returncode == 0, then.stderr
+    assert "| idm | 2 | 60 |" in then.stdout
+
+
 @pytest.mark.parametrize(("options", "message"), [
     (["--lockstep-runs", "2"], "options of --lockstep"),
     (["--device", "cuda"], "options of --lockstep"),
+    (["--checkpoint-minutes", "5"], "options of --lockstep"),
     (["--lockstep", "--device", "tpu"], "cpu or cuda"),
 ])
 def test_lockstep_options_are_checked(tmp_path: Path, options: list[str], message: str) -> None:
