@@ -14,6 +14,18 @@ from client.experiment.records import EpisodeRecord, RecordError, read_all
 
 FAILURES = ("large_distance", "collision")
 
+# Section 5 of the paper (its table and text): 10 runs x 1500 episodes per arm, by the arm
+# of this project that plays the same part; the success rate as printed there (12,249 of
+# 15,000 is 81.66%); "never_fails_after" None: failed to the end.
+PAPER = {
+    "ddpg": {"name": "DDPG", "successes": 12249, "percent": "81.6", "large_distance": 1251,
+             "collision": 1500, "never_fails_after": None, "speed_difference": (1.9497, 1.8057)},
+    "ddpg+shield": {"name": "DDPG + e-FSM", "successes": 14719, "percent": "98.1",
+                    "large_distance": 76, "collision": 205, "never_fails_after": 68,
+                    "speed_difference": (2.0460, 1.7800)},
+}
+PAPER_EPISODES = (10, 1500)
+
 
 def pooled(records: list[EpisodeRecord]) -> tuple[float | None, float | None]:
     """Mean and variance of |v_ego - v_lead| over all steps of the given episodes."""
@@ -162,6 +174,34 @@ def runs_table(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def paper_table(summary: dict[str, Any]) -> str | None:
+    """This experiment's DDPG arms beside the paper's result, or None without such arms."""
+    arms = [arm for arm in PAPER if arm in summary]
+    if not arms:
+        return None
+    lines = ["| | episodes | success | large distance | collision | no failure after episode "
+             "| speed difference mean / variance |", "|---|---:|---:|---:|---:|---:|---|"]
+    runs, each = PAPER_EPISODES
+    for arm in arms:
+        p = PAPER[arm]
+        after = "-" if p["never_fails_after"] is None else p["never_fails_after"]
+        lines.append(f"| paper: {p['name']} | {runs} x {each} | {p['successes']:,} "
+                     f"({p['percent']}%) | {p['large_distance']:,} "
+                     f"| {p['collision']:,} | {after} | {p['speed_difference'][0]:.4f} / "
+                     f"{p['speed_difference'][1]:.4f} |")
+    for arm in arms:
+        s = summary[arm]
+        counts = set(s["episodes_per_run"])
+        episodes = (f"{s['runs']} x {counts.pop()}" if len(counts) == 1
+                    else f"{s['runs']} runs, {s['episodes']:,}")
+        speed = " / ".join("-" if x is None else f"{x:.4f}"
+                           for x in (s["speed_difference_mean"], s["speed_difference_variance"]))
+        lines.append(f"| this: {arm} | {episodes} | {s['successes']:,} "
+                     f"({100 * s['success_rate']:.1f}%) | {s['large_distance']:,} "
+                     f"| {s['collision']:,} | {s['never_fails_after']} | {speed} |")
+    return "\n".join(lines)
+
+
 def labels(directories: list[Path]) -> list[str]:
     """A row label per experiment: its folder's name, or where names repeat (the same
     experiment on other seeds) its path below the folders' common parent."""
@@ -258,6 +298,9 @@ def write(directory: Path, limit: int | None = None) -> tuple[str, dict[str, Any
     text = f"{table(summary)}\n\nPer block of 100 episodes, all runs together:\n\n" \
            f"{blocks_table(summary)}\n\nPer run (its last {LATE} episodes on the right):\n\n" \
            f"{runs_table(summary)}"
+    beside = paper_table(summary)
+    if beside is not None:
+        text += f"\n\nBeside the paper's result (its section 5):\n\n{beside}"
     (directory / "table.md").write_text(text + "\n")
     figure(episodes, directory / "figure.png")
     return text, summary

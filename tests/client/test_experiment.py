@@ -202,6 +202,24 @@ def test_a_gzipped_run_goes_on_unpacked(tmp_path: Path) -> None:
         without_wall(records.read(source)[1])
 
 
+def test_the_report_puts_ddpg_arms_beside_the_paper() -> None:
+    """The paper's rows come first, then this experiment's in the same columns; other arms
+    have no counterpart in the paper."""
+    rows = [dataclasses.replace(record(run, e, "success" if e > 1 else "collision"),
+                                arm="ddpg+shield") for run in (0, 1) for e in (1, 2, 3)]
+    text = report.paper_table(report.summarise(rows))
+    assert text is not None
+    lines = text.splitlines()
+    assert lines[2] == ("| paper: DDPG + e-FSM | 10 x 1500 | 14,719 (98.1%) | 76 | 205 | 68 "
+                        "| 2.0460 / 1.7800 |")
+    assert lines[3] == "| this: ddpg+shield | 2 x 3 | 4 (66.7%) | 0 | 2 | 1 | 1.0000 / 0.0000 |"
+    assert report.paper_table(report.summarise([record(0, 1, "success")])) is None
+    both = report.paper_table(report.summarise(rows + [dataclasses.replace(
+        record(0, 1, "success"), arm="ddpg")]))
+    assert both is not None and both.splitlines()[2].startswith(
+        "| paper: DDPG | 10 x 1500 | 12,249 (81.6%) | 1,251 | 1,500 | - |")
+
+
 def test_report_of_each_runs_first_episodes(tmp_path: Path) -> None:
     """Runs stopped at different points are compared over the episodes all of them reached."""
     runner.run_one(CONFIG, "idm-aggressive", 0, tmp_path)
