@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -14,15 +15,24 @@ from client.experiment.records import EpisodeRecord, RecordError, read_all
 
 FAILURES = ("large_distance", "collision")
 
-# Section 5 of the paper (its table and text): 10 runs x 1500 episodes per arm, by the arm
-# of this project that plays the same part; the success rate as printed there (12,249 of
-# 15,000 is 81.66%); "never_fails_after" None: failed to the end.
-PAPER = {
-    "ddpg": {"name": "DDPG", "successes": 12249, "percent": "81.6", "large_distance": 1251,
-             "collision": 1500, "never_fails_after": None, "speed_difference": (1.9497, 1.8057)},
-    "ddpg+shield": {"name": "DDPG + e-FSM", "successes": 14719, "percent": "98.1",
-                    "large_distance": 76, "collision": 205, "never_fails_after": 68,
-                    "speed_difference": (2.0460, 1.7800)},
+@dataclass(frozen=True)
+class PaperArm:
+    """One arm's result in section 5 of the paper (its table and text), over 10 runs x 1500
+    episodes; ``percent`` as printed there (12,249 of 15,000 is 81.66%), ``never_fails_after``
+    None where the arm failed to the end."""
+
+    name: str
+    successes: int
+    percent: str
+    large_distance: int
+    collision: int
+    never_fails_after: int | None
+    speed_difference: tuple[float, float]
+
+
+PAPER = {  # by the arm of this project that plays the same part
+    "ddpg": PaperArm("DDPG", 12249, "81.6", 1251, 1500, None, (1.9497, 1.8057)),
+    "ddpg+shield": PaperArm("DDPG + e-FSM", 14719, "98.1", 76, 205, 68, (2.0460, 1.7800)),
 }
 PAPER_EPISODES = (10, 1500)
 
@@ -184,11 +194,11 @@ def paper_table(summary: dict[str, Any]) -> str | None:
     runs, each = PAPER_EPISODES
     for arm in arms:
         p = PAPER[arm]
-        after = "-" if p["never_fails_after"] is None else p["never_fails_after"]
-        lines.append(f"| paper: {p['name']} | {runs} x {each} | {p['successes']:,} "
-                     f"({p['percent']}%) | {p['large_distance']:,} "
-                     f"| {p['collision']:,} | {after} | {p['speed_difference'][0]:.4f} / "
-                     f"{p['speed_difference'][1]:.4f} |")
+        after = "-" if p.never_fails_after is None else p.never_fails_after
+        mean, var = p.speed_difference
+        lines.append(f"| paper: {p.name} | {runs} x {each} | {p.successes:,} ({p.percent}%) "
+                     f"| {p.large_distance:,} | {p.collision:,} | {after} "
+                     f"| {mean:.4f} / {var:.4f} |")
     for arm in arms:
         s = summary[arm]
         counts = set(s["episodes_per_run"])
