@@ -15,6 +15,7 @@ from client.experiment.records import EpisodeRecord, RecordError, read_all
 
 FAILURES = ("large_distance", "collision")
 
+
 @dataclass(frozen=True)
 class PaperArm:
     """One arm's result in section 5 of the paper (its table and text), over 10 runs x 1500
