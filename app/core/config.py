@@ -163,6 +163,10 @@ class ReviserConfig:
     # (results/README.md, tuned on seeds 0-1)
     flags: Literal["sticky", "overwrite", "rate"] = "rate"
     flag_min_rate: float = 0.002  # "rate" flags: failures per recognition that flag a state
+    # Not in the paper: a revision never goes past the proposal the wrong way. Alg. 2 returns
+    # the chosen bin's midpoint plus noise, so against a collision it can brake less than the
+    # controller asked (at full braking, bin 0's midpoint -1.9 plus noise of std 1.41)
+    one_sided: bool = False
     seed: int = 0
 
     def __post_init__(self) -> None:

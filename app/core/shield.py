@@ -388,10 +388,13 @@ class Shield:
         std = reviser.noise_std(cfg.reviser, self._a_max, self.counters.episodes)
         revised = actions.decode(final, cfg.action) + float(rng.normal(0.0, std))
         revised = min(max(revised, cfg.action.low), cfg.action.high)
+        slower = self._directions[verdict] == "decrease"
+        if cfg.reviser.one_sided:
+            revised = min(revised, proposed) if slower else max(revised, proposed)
         candidates = tuple(
             Candidate(actions.decode(r, cfg.action), r, self._verdict_name(v)) for r, v in tried
         )
-        reason = "revised_safety" if self._directions[verdict] == "decrease" else "revised_speed"
+        reason = "revised_safety" if slower else "revised_speed"
         return Decision(
             action=proposed if step.shadow else revised, revised=True, reason=reason,
             candidates=candidates, suggested=revised, **record, **common,  # type: ignore[arg-type]

@@ -17,6 +17,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from app.core import ShieldConfig, ShieldError
+
 
 @dataclass(frozen=True)
 class EpisodeRecord:
@@ -98,10 +100,19 @@ def start(path: Path, header: dict[str, Any]) -> list[EpisodeRecord]:
     if existing_header.get("identity") != header.get("identity"):
         raise RecordError(f"{path}: written with another configuration; use another --out")
     before, now = existing_header.get("shield"), header.get("shield")
-    if before is not None and now is not None and before != now:
+    if before is not None and now is not None and not same_shield(before, now):
         raise RecordError(f"{path}: written with another shield configuration (the defaults "
                           f"have changed since); remove it or use another --out")
     return records
+
+
+def same_shield(before: dict[str, Any], now: dict[str, Any]) -> bool:
+    """Whether two resolved shield configurations decide alike: a field added since the
+    first was written counts at its default, which keeps the behaviour it was added beside."""
+    try:
+        return ShieldConfig.from_dict(before) == ShieldConfig.from_dict(now)
+    except ShieldError:  # a field that no longer exists
+        return False
 
 
 def append(path: Path, record: EpisodeRecord) -> None:

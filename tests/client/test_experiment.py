@@ -62,6 +62,9 @@ def test_records_made_under_other_shield_defaults_are_refused(tmp_path: Path) ->
     path = records.path_for(tmp_path, arm, 0)
     lines = path.read_text().splitlines(keepends=True)
     header = json.loads(lines[0])
+    del header["header"]["shield"]["reviser"]["one_sided"]  # written before the field existed
+    path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
+    assert runner.run_one(CONFIG, arm, 0, tmp_path) == 0  # at its default: the same shield
     header["header"]["shield"]["observation"]["high"] = [32.0, 200.0, 32.0]  # older defaults
     path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
     with pytest.raises(records.RecordError, match="another shield configuration"):

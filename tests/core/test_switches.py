@@ -136,6 +136,26 @@ def test_a7_noise_is_a_variance_or_a_standard_deviation() -> None:
     assert noise_std(ReviserConfig(noise="std"), 2.0, 1) == pytest.approx(2.0)
 
 
+@pytest.mark.parametrize(("event", "proposal"), [("collision", -2.0), ("large_distance", 2.0)])
+def test_one_sided_revisions_never_go_past_the_proposal_the_wrong_way(
+        event: str, proposal: float) -> None:
+    """A one-state model flagged for ``event`` revises every step and finds no way out: Alg. 2
+    returns the extreme bin's midpoint plus noise (std 1.41 here), which against a collision
+    brakes less than full braking half the time; ``one_sided`` keeps the proposal there."""
+    applied = {}
+    for one_sided in (False, True):
+        shield = shield_with(reviser=ReviserConfig(activate_after_episodes=0,
+                                                   one_sided=one_sided))
+        for _ in range(4):
+            shield.step([1.0], None, event=event, done=True)
+        decisions = [shield.step([1.0], proposal) for _ in range(200)]
+        assert all(d.revised for d in decisions)
+        applied[one_sided] = np.array([d.action for d in decisions])
+    toward = np.sign(proposal)  # the wrong way: faster against a collision, slower behind
+    assert (toward * (applied[False] - proposal) < 0).mean() > 0.3
+    assert (applied[True] == proposal).all()
+
+
 def test_a8_the_transition_is_learned_under_the_executed_or_the_proposed_action() -> None:
     changed = {}
     for source in ("executed", "proposed"):
