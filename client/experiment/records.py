@@ -63,46 +63,49 @@ def claim(path: Path) -> IO[bytes]:
 
 
 def release(handle: IO[bytes], path: Path) -> None:
-    """Give up a claim before the run began: a file the claim left empty goes too, so that a
-    refused run leaves its folder as it was."""
+    """Give up a run's claim: a file the claim left empty goes too, so that a refused run, or
+    a finished one read from its archive, leaves its folder as it was."""
     if path.exists() and path.stat().st_size == 0:
         path.unlink()
     handle.close()
 
 
-def start(path: Path, header: dict[str, Any]) -> list[EpisodeRecord]:
-    """Open a run's file: create it with the header, or read the episodes it already holds.
+def start(path: Path, header: dict[str, Any], episodes: int) -> list[EpisodeRecord]:
+    """Open a run of ``episodes`` episodes: create its file with the header, or read the
+    episodes it already holds.
 
     An existing file must carry the same ``identity`` (the configuration less where the
     shield runs and how it is reached, which change no result) and, where both headers have
     it, the same resolved shield configuration (the overrides alone do not show a change of
-    the defaults), else :class:`RecordError`. A run kept gzipped goes on plain: the file is
-    unpacked first.
+    the defaults), else :class:`RecordError`. A run kept gzipped is read where it is when it
+    is finished, and unpacked to go on plain when it is not.
     """
     packed = path.with_name(path.name + ".gz")
-    if packed.exists() and (not path.exists() or path.stat().st_size == 0):
-        read(packed)  # a damaged archive is refused before anything changes
+    source = packed if packed.exists() and (
+        not path.exists() or path.stat().st_size == 0) else path
+    if source is path and (not path.exists() or path.stat().st_size == 0):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "w") as f:
+            f.write(json.dumps({"header": header}) + "\n")
+        return []
+    if source is path:
+        data = path.read_bytes()
+        if not data.endswith(b"\n"):  # a torn last line (a crash mid-write): cut it off
+            with open(path, "r+b") as f:
+                f.truncate(data.rfind(b"\n") + 1)
+    existing_header, records = read(source)  # a damaged archive is refused untouched
+    if existing_header.get("identity") != header.get("identity"):
+        raise RecordError(f"{source}: written with another configuration; use another --out")
+    before, now = existing_header.get("shield"), header.get("shield")
+    if before is not None and now is not None and not same_shield(before, now):
+        raise RecordError(f"{source}: written with another shield configuration (the defaults "
+                          f"have changed since); remove it or use another --out")
+    if source is packed and len(records) < episodes:
         with open(path, "wb") as f:
             f.write(gzip.decompress(packed.read_bytes()))
             f.flush()
             os.fsync(f.fileno())
         packed.unlink()
-    if not path.exists() or path.stat().st_size == 0:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path, "w") as f:
-            f.write(json.dumps({"header": header}) + "\n")
-        return []
-    data = path.read_bytes()
-    if not data.endswith(b"\n"):  # a torn last line (a crash mid-write): cut it off
-        with open(path, "r+b") as f:
-            f.truncate(data.rfind(b"\n") + 1)
-    existing_header, records = read(path)
-    if existing_header.get("identity") != header.get("identity"):
-        raise RecordError(f"{path}: written with another configuration; use another --out")
-    before, now = existing_header.get("shield"), header.get("shield")
-    if before is not None and now is not None and not same_shield(before, now):
-        raise RecordError(f"{path}: written with another shield configuration (the defaults "
-                          f"have changed since); remove it or use another --out")
     return records
 
 

@@ -273,7 +273,7 @@ class Run:
                   "learning": learning or {"lockstep": False, "device": "cpu"}}
         claim = records.claim(path)
         try:  # a refused file or an unreachable shield releases the run's file at once
-            recorded = records.start(path, header)
+            recorded = records.start(path, header, config.episodes)
             env: Any = CarFollowingEnv(lead=profiles(config.lead),
                                        reward=RewardConfig(**config.reward))
             shield = None
@@ -331,7 +331,7 @@ class Run:
             self.shield.close()
         if self.trace is not None:
             self.trace.close()
-        self.claim.close()
+        records.release(self.claim, self.path)
 
 
 def _torch_for_one_core() -> None:

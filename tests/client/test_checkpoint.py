@@ -177,7 +177,7 @@ def test_the_command_stops_at_its_deadline_and_goes_on(tmp_path: Path) -> None:
                "--episodes", "40", "--seed", "7", "--lead", "synthetic", "--lockstep",
                "--workers", "1", "--out", str(tmp_path)]
     other = records.path_for(tmp_path, "idm", 0)  # another arm, finished: not counted
-    records.start(other, {"identity": "an arm run before"})
+    records.start(other, {"identity": "an arm run before"}, 100)
     for episode in range(1, 101):
         records.append(other, EpisodeRecord(
             arm="idm", run=0, episode=episode, seed=1, steps=800, outcome="success",

@@ -186,8 +186,9 @@ def test_a_stopped_run_goes_on_by_replaying(tmp_path: Path) -> None:
 
 
 def test_a_gzipped_run_goes_on_unpacked(tmp_path: Path) -> None:
-    """Committed partial results are gzipped; running the experiment again unpacks the run and
-    goes on, replaying what was recorded (a damaged archive is refused, untouched)."""
+    """Committed results are gzipped; running the experiment again unpacks an unfinished run
+    and goes on, replaying what was recorded, and leaves a finished one packed (a damaged
+    archive is refused, untouched)."""
     whole, packed = tmp_path / "whole", tmp_path / "packed"
     arm = "idm-aggressive+shield"
     runner.run_one(CONFIG, arm, 0, whole)
@@ -201,8 +202,12 @@ def test_a_gzipped_run_goes_on_unpacked(tmp_path: Path) -> None:
     archive.write_bytes(gzip.compress(b"".join(source.read_bytes().splitlines(True)[:4])))
     assert runner.run_one(CONFIG, arm, 0, packed) == CONFIG.episodes - 3
     assert not archive.exists()
-    assert without_wall(records.read(records.path_for(packed, arm, 0))[1]) == \
-        without_wall(records.read(source)[1])
+    plain = records.path_for(packed, arm, 0)
+    assert without_wall(records.read(plain)[1]) == without_wall(records.read(source)[1])
+    archive.write_bytes(gzip.compress(plain.read_bytes()))  # finished and packed again
+    plain.unlink()
+    assert runner.run_one(CONFIG, arm, 0, packed) == 0
+    assert sorted(archive.parent.iterdir()) == [archive]  # read where it is, not unpacked
 
 
 def test_the_report_puts_ddpg_arms_beside_the_paper() -> None:
@@ -228,7 +233,7 @@ def test_report_of_each_runs_first_episodes(tmp_path: Path) -> None:
     runner.run_one(CONFIG, "idm-aggressive", 0, tmp_path)
     shorter = dataclasses.replace(CONFIG, episodes=5)
     path = records.path_for(tmp_path, "idm-aggressive", 1)
-    records.start(path, {"identity": "other run"})
+    records.start(path, {"identity": "other run"}, CONFIG.episodes)
     for r in records.read(records.path_for(tmp_path, "idm-aggressive", 0))[1][:shorter.episodes]:
         records.append(path, dataclasses.replace(r, run=1))
     summary = report.write(tmp_path, 5)[1]["idm-aggressive"]
