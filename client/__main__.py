@@ -156,10 +156,13 @@ def report_command(
 def compare_command(
     directories: list[Path],
     out: Annotated[Path | None, typer.Option(help="Also write the table here.")] = None,
+    episodes: Annotated[int | None, typer.Option(
+        min=1, help="Only each run's first N episodes (runs stopped at different points).")]
+    = None,
 ) -> None:
     """One table over the experiments in DIRECTORIES (ablations): a row per directory and arm."""
     try:
-        text = report.compare(directories)
+        text = report.compare(directories, episodes)
     except RecordError as error:
         fail(str(error))
     if out is not None:

@@ -226,13 +226,16 @@ def labels(directories: list[Path]) -> list[str]:
     return [str(d.relative_to(common)) for d in resolved]
 
 
-def compare(directories: list[Path]) -> str:
+def compare(directories: list[Path], limit: int | None = None) -> str:
     """One table over several experiments (ablations): a row per directory and arm, with the
-    shield configuration each was run with."""
+    shield configuration each was run with; of each run's first ``limit`` episodes, if
+    given."""
     summary: dict[str, Any] = {}
     notes: dict[str, str] = {}
     for directory, name in zip(directories, labels(directories), strict=True):
         headers, episodes = read_all(directory)
+        if limit is not None:
+            episodes = first_episodes(episodes, limit)
         overrides = json.dumps(headers[0]["config"]["shield_config"], separators=(",", ":"))
         for arm, row in summarise(episodes).items():
             label = f"{name}: {arm}"

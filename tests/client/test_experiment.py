@@ -334,6 +334,13 @@ def test_compare_puts_experiments_side_by_side(tmp_path: Path) -> None:
     assert rows[3].endswith('`{"reviser":{"flags":"overwrite"}}` |')
     assert rows[0].endswith(" - |")
     assert (tmp_path / "table.md").read_text() == result.stdout
+    first = cli("compare", str(tmp_path / "default"), str(tmp_path / "overwrite"),
+                "--episodes", "1")
+    assert first.returncode == 0, first.stderr
+    counts = [row.split(" | ")[1:3] for row in first.stdout.splitlines() if ": idm" in row]
+    assert counts == [["1", "1"]] * 4  # runs, episodes: each run's first episode only
+    too_many = cli("compare", str(tmp_path / "default"), "--episodes", "3")
+    assert too_many.returncode == 2 and "--episodes must be at most 2" in too_many.stderr
 
 
 def test_two_processes_never_write_one_run(tmp_path: Path) -> None:
