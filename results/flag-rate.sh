@@ -8,18 +8,21 @@
 # evaluation seeds), 4 runs x 600 episodes per row in one lockstep group, in-process shields:
 # the default, a rate four times lower (0.0005), and sticky flags (the spec's recommendation,
 # never lifted). One table, results/tuning/flag-rate/flag-rate.md, and the states of every
-# model at the end, <row>/states.md. Resumable.
+# model at the end, <row>/states.md. Resumable. SEED=5 repeats it on another tuning seed, into
+# results/tuning/flag-rate-seed-5.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/_venv.sh
+seed=${SEED:-4}
 out=results/tuning/flag-rate
+if [[ $seed != 4 ]]; then out+="-seed-$seed"; fi
 rows=("default;{}" "rate-0.0005;{\"reviser\": {\"flag_min_rate\": 0.0005}}"
       "sticky;{\"reviser\": {\"flags\": \"sticky\"}}")
 pids=()
 for row in "${rows[@]}"; do
     name=${row%%;*}
     .venv/bin/python -m client run --arms ddpg+shield --shield-config "${row#*;}" \
-        --out "$out/$name" --runs 4 --episodes 600 --seed 4 --shield local --lockstep \
+        --out "$out/$name" --runs 4 --episodes 600 --seed "$seed" --shield local --lockstep \
         --workers 1 >/dev/null &
     pids+=($!)
 done
