@@ -81,13 +81,13 @@ def start(path: Path, header: dict[str, Any], episodes: int) -> list[EpisodeReco
     is finished, and unpacked to go on plain when it is not.
     """
     packed = path.with_name(path.name + ".gz")
-    source = packed if packed.exists() and (
-        not path.exists() or path.stat().st_size == 0) else path
-    if source is path and (not path.exists() or path.stat().st_size == 0):
+    empty = not path.exists() or path.stat().st_size == 0
+    if empty and not packed.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
         with open(path, "w") as f:
             f.write(json.dumps({"header": header}) + "\n")
         return []
+    source = packed if empty else path
     if source is path:
         data = path.read_bytes()
         if not data.endswith(b"\n"):  # a torn last line (a crash mid-write): cut it off

@@ -133,6 +133,11 @@ def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
     return summary
 
 
+def four(x: float | None) -> str:
+    """A statistic to four decimals, or "-" where there was nothing to measure."""
+    return "-" if x is None else f"{x:.4f}"
+
+
 def table(summary: dict[str, Any], notes: dict[str, str] | None = None) -> str:
     """The paper's Table 1 per arm, as Markdown; ``notes`` adds a column (for example the
     shield configuration of each row)."""
@@ -142,16 +147,13 @@ def table(summary: dict[str, Any], notes: dict[str, str] | None = None) -> str:
         f"episode | speed difference mean | variance | interventions |{extra[0]}",
         f"|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|{extra[1]}",
     ]
-    def number(x: float | None) -> str:
-        return "-" if x is None else f"{x:.4f}"
-
     for arm, s in summary.items():
         note = "" if notes is None else f" {notes[arm]} |"
         lines.append(
             f"| {arm} | {s['runs']} | {s['episodes']} | {s['successes']} "
             f"({100 * s['success_rate']:.1f}%) | {s['large_distance']} | {s['collision']} "
-            f"| {s['never_fails_after']} | {number(s['speed_difference_mean'])} "
-            f"| {number(s['speed_difference_variance'])} | {sum(s['interventions'].values())} "
+            f"| {s['never_fails_after']} | {four(s['speed_difference_mean'])} "
+            f"| {four(s['speed_difference_variance'])} | {sum(s['interventions'].values())} "
             f"|{note}")
     return "\n".join(lines)
 
@@ -205,8 +207,7 @@ def paper_table(summary: dict[str, Any]) -> str | None:
         counts = set(s["episodes_per_run"])
         episodes = (f"{s['runs']} x {counts.pop()}" if len(counts) == 1
                     else f"{s['runs']} runs, {s['episodes']:,}")
-        speed = " / ".join("-" if x is None else f"{x:.4f}"
-                           for x in (s["speed_difference_mean"], s["speed_difference_variance"]))
+        speed = f"{four(s['speed_difference_mean'])} / {four(s['speed_difference_variance'])}"
         lines.append(f"| this: {arm} | {episodes} | {s['successes']:,} "
                      f"({100 * s['success_rate']:.1f}%) | {s['large_distance']:,} "
                      f"| {s['collision']:,} | {s['never_fails_after']} | {speed} |")
