@@ -245,6 +245,26 @@ class ShieldConfig:
         """Build a configuration from nested plain data; missing fields take their defaults."""
         return _build(cls, data, "")
 
+    @classmethod
+    def from_stored(cls, data: Mapping[str, Any]) -> ShieldConfig:
+        """A whole configuration that :meth:`to_dict` wrote, maybe by an older version: a
+        field it lacks takes the value that keeps the behaviour of its time (the value the
+        field was added with, where the default has changed since), so a stored model or
+        record decides as it did when it was written."""
+        if not isinstance(data, Mapping):
+            raise InvalidConfig("expected an object")
+        filled = {key: dict(value) if isinstance(value, Mapping) else value
+                  for key, value in data.items()}
+        for (section, name), value in ADDED_WITH.items():
+            part = filled.get(section)
+            if isinstance(part, dict):
+                part.setdefault(name, value)
+        return cls.from_dict(filled)
+
+
+# Fields whose default changed after they were added, with the value they were added with.
+ADDED_WITH: dict[tuple[str, str], Any] = {("reviser", "one_sided"): False}
+
 
 def _lists(value: Any) -> Any:
     if isinstance(value, dict):

@@ -483,7 +483,7 @@ class Shield:
 
     @classmethod
     def _restore(cls, data: dict[str, Any]) -> Shield:
-        self = cls(ShieldConfig.from_dict(data["config"]))
+        self = cls(ShieldConfig.from_stored(data["config"]))
         cfg = self.config
         counters = data["counters"]
         self.counters = Counters(

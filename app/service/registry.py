@@ -145,7 +145,7 @@ class ModelRegistry:
         if blob is not None:
             shield = Shield.from_snapshot(codec.from_npz(blob))
         else:
-            shield = Shield(ShieldConfig.from_dict(store.read_config()))
+            shield = Shield(ShieldConfig.from_stored(store.read_config()))
         replayed = 0
         for record in store.records():
             if record["v"] <= shield.counters.model_version:

@@ -111,9 +111,10 @@ def start(path: Path, header: dict[str, Any], episodes: int) -> list[EpisodeReco
 
 def same_shield(before: dict[str, Any], now: dict[str, Any]) -> bool:
     """Whether two resolved shield configurations decide alike: a field added since the
-    first was written counts at its default, which keeps the behaviour it was added beside."""
+    first was written counts at the value it was added with, which keeps the behaviour of
+    its time."""
     try:
-        return ShieldConfig.from_dict(before) == ShieldConfig.from_dict(now)
+        return ShieldConfig.from_stored(before) == ShieldConfig.from_stored(now)
     except ShieldError:  # a field that no longer exists
         return False
 

@@ -163,6 +163,20 @@ def test_snapshot_restore_makes_the_same_decisions() -> None:
     assert_same(copy.snapshot(), shield.snapshot())
 
 
+def test_a_snapshot_from_before_a_switch_restores_with_the_behaviour_of_its_time() -> None:
+    """A switch added off and turned on by default later (``reviser.one_sided``): a snapshot
+    written before the switch existed lacks it and must go on deciding as it did."""
+    shield = Shield(cliff_config(activate_after_episodes=5, one_sided=False))
+    run_cliff(shield, 30, seed=4)
+    old = shield.snapshot()
+    del old["config"]["reviser"]["one_sided"]
+    copy = Shield.from_snapshot(old)
+    assert copy.config == shield.config
+    _, original = run_cliff(shield, 30, seed=9)
+    _, restored = run_cliff(copy, 30, seed=9)
+    assert restored == original
+
+
 def test_a_damaged_snapshot_is_refused() -> None:
     data = Shield().snapshot()
     with pytest.raises(InvalidSnapshot):
