@@ -1,16 +1,23 @@
 #!/usr/bin/env bash
-# DDPG alone against today's default shield on the evaluation seeds with twice the runs of the
-# reduced protocol (4 runs x 300 episodes per arm, base seed 1000, in-process shields), both
-# on one machine: two runs a row were found too few to rank settings (results/README.md, "The
+# DDPG alone against the shield on the evaluation seeds with twice the runs of the reduced
+# protocol (4 runs x 300 episodes per arm, base seed 1000, in-process shields), all on one
+# machine: two runs a row were found too few to rank settings (results/README.md, "The
 # clustering radius"). Runs 0 and 1 are those of the reduced protocol's rows (seeds are
-# spawned per run index), recomputed here. One table: results/reduced/four-runs/four-runs.md.
-# Resumable: finished experiments are skipped.
+# spawned per run index), recomputed here. Rows: DDPG alone; the shield with one-sided
+# revisions off (ddpg-shield, recorded with `{}` while off was the default: commit c520107,
+# the last such, regenerates it; later code refuses to extend it); and one-sided revisions
+# (ddpg-shield-one-sided, today's default, asked for explicitly). One table:
+# results/reduced/four-runs/four-runs.md. Resumable: finished experiments are skipped.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/_venv.sh
 out=results/reduced/four-runs
-for arm in ddpg ddpg+shield; do
-    .venv/bin/python -m client run --arms "$arm" --out "$out/${arm/+/-}" --runs 4 \
-        --episodes 300 --seed 1000 --shield local --workers 2 >/dev/null
-done
-.venv/bin/python -m client compare "$out"/{ddpg,ddpg-shield} --out "$out/four-runs.md"
+run() {  # run OUT ARM [OVERRIDES]
+    .venv/bin/python -m client run --arms "$2" --out "$out/$1" --runs 4 --episodes 300 \
+        --seed 1000 --shield local --workers 2 --shield-config "${3:-{\}}" >/dev/null
+}
+run ddpg ddpg
+[[ -d $out/ddpg-shield ]] || run ddpg-shield ddpg+shield '{"reviser": {"one_sided": false}}'
+run ddpg-shield-one-sided ddpg+shield '{"reviser": {"one_sided": true}}'
+.venv/bin/python -m client compare "$out"/{ddpg,ddpg-shield,ddpg-shield-one-sided} \
+    --out "$out/four-runs.md"
