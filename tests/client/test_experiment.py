@@ -62,10 +62,30 @@ def test_records_made_under_other_shield_defaults_are_refused(tmp_path: Path) ->
     path = records.path_for(tmp_path, arm, 0)
     lines = path.read_text().splitlines(keepends=True)
     header = json.loads(lines[0])
-    del header["header"]["shield"]["reviser"]["one_sided"]  # written before the field existed
+    header["header"]["shield"]["flag_min_rate_unused"] = None  # a field that no longer exists
     path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
-    assert runner.run_one(CONFIG, arm, 0, tmp_path) == 0  # at its default: the same shield
+    with pytest.raises(records.RecordError, match="another shield configuration"):
+        runner.run_one(CONFIG, arm, 0, tmp_path)
+    del header["header"]["shield"]["flag_min_rate_unused"]
     header["header"]["shield"]["observation"]["high"] = [32.0, 200.0, 32.0]  # older defaults
+    path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
+    with pytest.raises(records.RecordError, match="another shield configuration"):
+        runner.run_one(CONFIG, arm, 0, tmp_path)
+
+
+def test_records_from_before_a_switch_existed_keep_the_value_it_was_added_with(
+        tmp_path: Path) -> None:
+    """``reviser.one_sided`` was added off and is on by default now: a header that lacks it
+    ran with it off, so only the overrides that turn it off again go on with those records."""
+    arm = "idm-aggressive+shield"
+    off = dataclasses.replace(CONFIG, shield_config={
+        "reviser": {"activate_after_episodes": 2, "one_sided": False}})
+    runner.run_one(off, arm, 0, tmp_path)
+    path = records.path_for(tmp_path, arm, 0)
+    lines = path.read_text().splitlines(keepends=True)
+    header = json.loads(lines[0])
+    del header["header"]["shield"]["reviser"]["one_sided"]  # written before the field existed
+    header["header"]["identity"] = CONFIG.identity()  # as if run without the override
     path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
     with pytest.raises(records.RecordError, match="another shield configuration"):
         runner.run_one(CONFIG, arm, 0, tmp_path)

@@ -253,6 +253,7 @@ def test_paper_literal_preset_takes_the_literal_reading_everywhere() -> None:
     assert literal.reviser.search == "literal"
     assert literal.reviser.multi_step == "single"
     assert literal.reviser.flags == "overwrite"
+    assert literal.reviser.one_sided is False  # not in the paper
     assert literal.clustering.creation_rule == "ets2004"
     assert literal.transitions.action_source == "proposed"
     assert literal.transitions.across_episodes is True
