@@ -85,6 +85,8 @@ def test_records_from_before_a_switch_existed_keep_the_value_it_was_added_with(
     lines = path.read_text().splitlines(keepends=True)
     header = json.loads(lines[0])
     del header["header"]["shield"]["reviser"]["one_sided"]  # written before the field existed
+    path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
+    assert runner.run_one(off, arm, 0, tmp_path) == 0  # the same shield: nothing to do
     header["header"]["identity"] = CONFIG.identity()  # as if run without the override
     path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
     with pytest.raises(records.RecordError, match="another shield configuration"):
