@@ -118,7 +118,8 @@ class ModelCreate(BaseModel):
         default_factory=dict,
         description="Overrides of the paper's car-following configuration: observation "
         "(names, low, high), action (low, high, step, out_of_range), criteria "
-        "([{name, direction}]), clustering (rho, epsilon, creation_rule, spread), "
+        "([{name, direction}]), clustering (rho, epsilon, creation_rule, spread, "
+        "min_variance, failure_states), "
         "transitions (learning_rate, prior, on_new_state, expansion, action_source, "
         "across_episodes, on_replace), reviser (activate_after_episodes, noise_k, noise, "
         "horizon, transpose, inspect, search, multi_step, flags, flag_min_rate, one_sided, "

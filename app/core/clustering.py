@@ -118,8 +118,13 @@ class EvolvingClusterer:
         d2 = self._sq_norms[:n] - 2.0 * (self._centres[:n] @ z) + sq_norm
         return np.maximum(d2, 0.0, out=d2)
 
-    def learn_one(self, z: FloatArray) -> StateUpdate:
-        """Cluster one normalised observation; may create or move one state."""
+    def learn_one(self, z: FloatArray, failure: bool = False) -> StateUpdate:
+        """Cluster one normalised observation; may create or move one state.
+
+        ``failure``: the observation ends an episode in a failure. With ``failure_states`` on,
+        a failure that neither potential rule places and that lies outside its nearest state's
+        radius creates a state.
+        """
         cfg = self.config
         self.k += 1
         k = self.k
@@ -148,6 +153,8 @@ class EvolvingClusterer:
             candidate = p_new > p_max
             replace = p_new / p_max - delta / cfg.epsilon >= 1.0
 
+        if not candidate and failure and cfg.failure_states:
+            candidate, replace = delta > self._radii[nearest], False  # outside its zone
         if candidate and replace:
             self._centres[nearest] = z
             self._sq_norms[nearest] = theta

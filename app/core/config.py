@@ -122,6 +122,10 @@ class ClusteringConfig:
     creation_rule: Literal["ets_plus", "ets2004"] = "ets_plus"  # A2
     spread: Literal["radius", "member_variance", "ets2004"] = "radius"  # A9
     min_variance: float = 1e-4
+    # Not in the paper: a failure observed outside its nearest state's zone of influence is a
+    # new situation, so it becomes a state of its own rather than widening a state of safe
+    # driving (eTS+ creates states only from potentials, which a rare failure never tops)
+    failure_states: bool = False
 
     def __post_init__(self) -> None:
         _check(0.0 <= self.rho <= 1.0, "rho", "rho lies in [0, 1]")

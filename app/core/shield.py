@@ -249,7 +249,7 @@ class Shield:
         cfg = self.config
         z = self.normalise(step.observation)
         # §2.4 clustering: a new state expands every TPM (§8)
-        update = self.clusterer.learn_one(z)
+        update = self.clusterer.learn_one(z, failure=step.event is not None)
         if update.is_new:
             self.transitions.add_state()
             self.flags.add_state()

@@ -60,6 +60,39 @@ def test_a2_ets_plus_makes_a_state_for_a_novel_outlier_and_ets2004_does_not() ->
     assert counts == {"ets_plus": 2, "ets2004": 1}
 
 
+# Dense driving near 0 and 0.1, one early outlier at 3 whose low potential keeps the eTS+
+# outlier rule quiet afterwards: a state near 0.1 (radius 0.07) and the state at 3
+OUTLIER_STREAM = [0.0, 0.1] * 5 + [3.0] + [0.0, 0.1] * 5
+
+
+def outlier_clusterer(failure_states: bool) -> EvolvingClusterer:
+    c = EvolvingClusterer(ClusteringConfig(failure_states=failure_states), 1, 10)
+    for z in OUTLIER_STREAM:
+        c.learn_one(np.array([z]))
+    assert c.n_states == 2
+    return c
+
+
+def test_failure_states_give_a_failure_outside_every_zone_a_state_of_its_own() -> None:
+    kinds = {}
+    for on in (False, True):
+        kinds[on] = [outlier_clusterer(on).learn_one(np.array([z]), failure=failure).kind
+                     for z, failure in ((0.6, True), (0.6, False), (0.04, True), (0.13, True))]
+    # 0.6 lies 0.5 from state 0: a new situation only when it ends in a failure; 0.04 lies
+    # within state 0's radius; 0.13 is dense enough for eTS+ to move state 0 onto it anyway
+    assert kinds[False] == ["assigned", "assigned", "assigned", "replaced"]
+    assert kinds[True] == ["new", "assigned", "assigned", "replaced"]
+
+
+def test_failure_states_flag_the_new_state_for_its_criterion() -> None:
+    shield = shield_with(clustering=ClusteringConfig(failure_states=True))
+    for z in OUTLIER_STREAM:
+        shield.step([z / 3.0], 0.0)  # the cliff world observes [0, 1]: the same stream, scaled
+    decision = shield.step([0.2], None, event="collision", done=True)
+    assert decision.new_state and decision.n_states == 3
+    assert shield.state_view(2)["flag"] == "collision"
+
+
 def test_a3_pad_learns_the_transition_into_a_brand_new_state() -> None:
     rows = {}
     for mode in ("skip", "pad"):
