@@ -124,7 +124,8 @@ class ClusteringConfig:
     min_variance: float = 1e-4
     # Not in the paper: a failure observed outside its nearest state's zone of influence is a
     # new situation, so it becomes a state of its own rather than widening a state of safe
-    # driving (eTS+ creates states only from potentials, which a rare failure never tops)
+    # driving (eTS+ creates states only from potentials, which a rare failure seldom tops or
+    # undercuts). Off: level with it on two tuning seeds (results/README.md)
     failure_states: bool = False
 
     def __post_init__(self) -> None:
