@@ -34,11 +34,17 @@ class ObservationSpec:
     and the reviser could not tell the seconds before a crash from ordinary following
     (results/README.md, "The headway scale"; tuned on seeds 0-2). Headways above 50 m simply
     normalise above 1.
+
+    ``knee`` (not in the paper; empty by default: linear) gives a dimension a positive knee k
+    that maps it through the signed log ``k ln(1 + |x| / k)`` before the bounds scale it:
+    linear well below k, logarithmic above, so that close headways get finer states and far
+    ones coarser. 0 keeps a dimension linear.
     """
 
     names: tuple[str, ...] = ("v_ego", "headway", "v_lead")
     low: tuple[float, ...] = (0.0, 0.0, 0.0)  # [m/s, m, m/s]
     high: tuple[float, ...] = (32.0, 50.0, 32.0)  # [m/s, m, m/s]
+    knee: tuple[float, ...] = ()  # [m/s, m, m/s]; empty or one per name, 0 = linear
 
     def __post_init__(self) -> None:
         _check(len(self.names) >= 1, "names", "at least one observation dimension is needed")
@@ -48,6 +54,9 @@ class ObservationSpec:
         for lo, hi in zip(self.low, self.high, strict=True):
             _check(math.isfinite(lo) and math.isfinite(hi), "low", "bounds must be finite")
             _check(hi > lo, "high", "every high bound must exceed its low bound")
+        _check(len(self.knee) in (0, len(self.names)), "knee", "knee is empty or one per name")
+        _check(all(math.isfinite(k) and k >= 0 for k in self.knee), "knee",
+               "every knee is finite and >= 0")
 
     @property
     def size(self) -> int:

@@ -114,8 +114,10 @@ class Shield:
                 "on_replace='reset' needs the lazy TPM backend", field="transitions.on_replace"
             )
         self._dim = cfg.observation.size
-        self._low = np.array(cfg.observation.low)
-        self._range = np.array(cfg.observation.high) - self._low
+        knee = np.array(cfg.observation.knee or [0.0] * self._dim)
+        self._knee = knee if knee.any() else None
+        self._low = self._warp(np.array(cfg.observation.low))
+        self._range = self._warp(np.array(cfg.observation.high)) - self._low
         self._directions = [c.direction for c in cfg.criteria]
         self._a_max = max(abs(cfg.action.low), abs(cfg.action.high))
         self.reset()
@@ -144,9 +146,28 @@ class Shield:
         return self.clusterer.n_states
 
     def normalise(self, observation: FloatArray) -> FloatArray:
-        """Physical units to the clustering space: ``(z - low) / (high - low)``."""
-        z: FloatArray = (observation - self._low) / self._range
+        """Physical units to the clustering space: ``(z - low) / (high - low)``, each term
+        through its dimension's knee first."""
+        z: FloatArray = (self._warp(observation) - self._low) / self._range
         return z
+
+    def physical(self, z: FloatArray) -> FloatArray:
+        """The clustering space back to physical units (the inverse of :meth:`normalise`)."""
+        warped = self._low + z * self._range
+        if self._knee is None:
+            return warped
+        k = np.where(self._knee > 0, self._knee, 1.0)
+        curved = np.sign(warped) * k * np.expm1(np.abs(warped) / k)
+        out: FloatArray = np.where(self._knee > 0, curved, warped)
+        return out
+
+    def _warp(self, x: FloatArray) -> FloatArray:
+        """The signed log ``k ln(1 + |x| / k)`` of each dimension with a knee k > 0."""
+        if self._knee is None:
+            return x
+        k = np.where(self._knee > 0, self._knee, 1.0)
+        out: FloatArray = np.where(self._knee > 0, np.sign(x) * k * np.log1p(np.abs(x) / k), x)
+        return out
 
     # --- one step --------------------------------------------------------------------------
 
@@ -410,7 +431,7 @@ class Shield:
         failures (states x criteria)."""
         names = [None] + [c.name for c in self.config.criteria]
         return {
-            "centre": self._low + self.clusterer.centres * self._range,
+            "centre": self.physical(self.clusterer.centres),
             "spread": np.sqrt(self.clusterer.variances()),
             "flag": [names[f] for f in self.flags.flags],
             "visits": self.flags.visits.copy(),
@@ -424,7 +445,7 @@ class Shield:
         failures = self.flags.failures[index]
         return {
             "index": index,
-            "centre": [float(v) for v in self._low + self.clusterer.centres[index] * self._range],
+            "centre": [float(v) for v in self.physical(self.clusterer.centres[index])],
             "spread": float(np.sqrt(self.clusterer.variances()[index])),
             "flag": names[int(self.flags.flags[index])],
             "visits": int(self.flags.visits[index]),

@@ -210,6 +210,20 @@ def test_states_view_reports_physical_centres() -> None:
     assert states["flag"] == [None] and states["visits"].tolist() == [1]
 
 
+def test_a_knee_keeps_the_views_in_physical_units() -> None:
+    shield = Shield(ShieldConfig.from_dict({"observation": {"knee": [0.0, 20.0, 0.0]}}))
+    shield.step([16.0, 100.0, 8.0], 0.0)
+    assert shield.states()["centre"][0] == pytest.approx([16.0, 100.0, 8.0])
+    assert shield.state_view(0)["centre"] == pytest.approx([16.0, 100.0, 8.0])
+
+
+@pytest.mark.parametrize("knee", [[20.0], [0.0, -1.0, 0.0], [0.0, math.inf, 0.0]])
+def test_a_bad_knee_names_its_field(knee: list[float]) -> None:
+    with pytest.raises(ShieldError) as raised:
+        ShieldConfig.from_dict({"observation": {"knee": knee}})
+    assert raised.value.field == "observation.knee"
+
+
 def test_an_empty_model_has_empty_views_and_snapshots() -> None:
     shield = Shield()
     assert shield.transitions.matrix(0).shape == (0, 0)
