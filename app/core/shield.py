@@ -115,7 +115,8 @@ class Shield:
             )
         self._dim = cfg.observation.size
         knee = np.array(cfg.observation.knee or [0.0] * self._dim)
-        self._knee = knee if knee.any() else None
+        self._curved = knee > 0 if knee.any() else None  # the dimensions with a knee
+        self._knee = np.where(knee > 0, knee, 1.0)
         self._low = self._warp(np.array(cfg.observation.low))
         self._range = self._warp(np.array(cfg.observation.high)) - self._low
         self._directions = [c.direction for c in cfg.criteria]
@@ -154,19 +155,19 @@ class Shield:
     def physical(self, z: FloatArray) -> FloatArray:
         """The clustering space back to physical units (the inverse of :meth:`normalise`)."""
         warped = self._low + z * self._range
-        if self._knee is None:
+        if self._curved is None:
             return warped
-        k = np.where(self._knee > 0, self._knee, 1.0)
-        curved = np.sign(warped) * k * np.expm1(np.abs(warped) / k)
-        out: FloatArray = np.where(self._knee > 0, curved, warped)
+        k = self._knee
+        out: FloatArray = np.where(self._curved, np.sign(warped) * k * np.expm1(np.abs(warped) / k),
+                                   warped)
         return out
 
     def _warp(self, x: FloatArray) -> FloatArray:
         """The signed log ``k ln(1 + |x| / k)`` of each dimension with a knee k > 0."""
-        if self._knee is None:
+        if self._curved is None:
             return x
-        k = np.where(self._knee > 0, self._knee, 1.0)
-        out: FloatArray = np.where(self._knee > 0, np.sign(x) * k * np.log1p(np.abs(x) / k), x)
+        k = self._knee
+        out: FloatArray = np.where(self._curved, np.sign(x) * k * np.log1p(np.abs(x) / k), x)
         return out
 
     # --- one step --------------------------------------------------------------------------
