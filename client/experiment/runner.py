@@ -30,6 +30,7 @@ from concurrent.futures import (
 )
 from dataclasses import dataclass, field
 from functools import partial
+from multiprocessing.managers import SyncManager
 from pathlib import Path
 from typing import IO, Any, Literal, Protocol
 
@@ -634,8 +635,9 @@ class Lockstep:
 
 
 def _die_with_parent(parent: int) -> None:
-    """A worker ends with the process that started it, even one killed outright: an orphan
-    would go on appending to records that a restarted experiment is writing too."""
+    """A worker (or the progress queue's manager) ends with the process that started it, even
+    one killed outright: an orphan would go on appending to records that a restarted
+    experiment is writing too, or linger."""
     if sys.platform == "linux":
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
@@ -669,7 +671,9 @@ def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None
             jobs.extend((partial(run_one, stop=stop), (config, arm, run, out, token))
                         for run in range(config.runs))
     context = multiprocessing.get_context("spawn")
-    with context.Manager() as manager, ProcessPoolExecutor(
+    manager = SyncManager(ctx=context)
+    manager.start(_die_with_parent, (os.getpid(),))
+    with manager, ProcessPoolExecutor(
             workers, mp_context=context, initializer=_die_with_parent,
             initargs=(os.getpid(),)) as pool:
         progress = manager.Queue()

@@ -375,8 +375,30 @@ def test_two_processes_never_write_one_run(tmp_path: Path) -> None:
     runner.Run.open(CONFIG, "idm-aggressive", 0, tmp_path, None).close()  # free again
 
 
+def children(pid: int) -> list[int]:
+    """The live (not zombie) processes whose parent is ``pid``, from /proc."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if entry.name.isdigit() and fields[1] == str(pid) and fields[0] != "Z":
+            out.append(int(entry.name))
+    return out
+
+
+def alive(pid: int) -> bool:
+    try:
+        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="the workers' parent-death signal is Linux's")
 def test_workers_end_with_a_killed_runner(tmp_path: Path) -> None:
-    """kill -9 of `client run` leaves no worker appending to its records."""
+    """kill -9 of `client run` leaves no worker appending to its records, and no process of
+    its own (workers, the progress queue's manager) behind."""
     process = subprocess.Popen(
         [sys.executable, "-m", "client", "run", "--arms", "idm", "--runs", "2", "--episodes",
          "2000", "--lead", "synthetic", "--workers", "2", "--out", str(tmp_path)],
@@ -390,12 +412,15 @@ def test_workers_end_with_a_killed_runner(tmp_path: Path) -> None:
     while min(lines()) < 3 and time.monotonic() < deadline:
         time.sleep(0.1)
     assert min(lines()) >= 3, "the runs did not start"
+    spawned = children(process.pid)
+    assert len(spawned) >= 3  # two workers and the manager
     process.kill()
     process.wait()
     time.sleep(2)  # the workers' SIGTERM arrives at once; let any last episode land
     settled = lines()
     time.sleep(2)
     assert lines() == settled
+    assert [pid for pid in spawned if alive(pid)] == []
 
 
 def test_a_shielded_run_records_its_whole_shield_configuration(tmp_path: Path) -> None:
