@@ -375,24 +375,25 @@ def test_two_processes_never_write_one_run(tmp_path: Path) -> None:
     runner.Run.open(CONFIG, "idm-aggressive", 0, tmp_path, None).close()  # free again
 
 
-def children(pid: int) -> list[int]:
-    """The live (not zombie) processes whose parent is ``pid``, from /proc."""
-    out = []
-    for entry in Path("/proc").iterdir():
-        try:
-            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            continue
-        if entry.name.isdigit() and fields[1] == str(pid) and fields[0] != "Z":
-            out.append(int(entry.name))
-    return out
+def process_state(pid: int) -> tuple[str, int] | None:
+    """A process's state letter and parent, from /proc; None when it is gone."""
+    try:
+        fields = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return fields[0], int(fields[1])
 
 
 def alive(pid: int) -> bool:
-    try:
-        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
+    state = process_state(pid)
+    return state is not None and state[0] != "Z"
+
+
+def children(pid: int) -> list[int]:
+    """The live (not zombie) processes whose parent is ``pid``."""
+    pids = (int(entry.name) for entry in Path("/proc").iterdir() if entry.name.isdigit())
+    return [child for child in pids
+            if alive(child) and (state := process_state(child)) and state[1] == pid]
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="the workers' parent-death signal is Linux's")
