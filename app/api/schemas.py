@@ -117,7 +117,7 @@ class ModelCreate(BaseModel):
     config: dict[str, Any] = Field(
         default_factory=dict,
         description="Overrides of the paper's car-following configuration: observation "
-        "(names, low, high, knee), action (low, high, step, out_of_range), criteria "
+        "(names, low, high, knee, knee_shape), action (low, high, step, out_of_range), criteria "
         "([{name, direction}]), clustering (rho, epsilon, creation_rule, spread, "
         "min_variance, failure_states), "
         "transitions (learning_rate, prior, on_new_state, expansion, action_source, "

@@ -38,13 +38,17 @@ class ObservationSpec:
     ``knee`` (not in the paper; empty by default: linear) gives a dimension a positive knee k
     that maps it through the signed log ``k ln(1 + |x| / k)`` before the bounds scale it:
     linear well below k, logarithmic above, so that close headways get finer states and far
-    ones coarser. 0 keeps a dimension linear.
+    ones coarser. 0 keeps a dimension linear. ``knee_shape`` ``double`` (not in the paper)
+    counts every unit within k of zero twice instead, ``x + clip(x, -k, k)``, and scales by the
+    bounds as if linear: the close range spans twice as much of the clustering space and the
+    far range keeps its resolution (the log's coarser far headways cost runs that fell behind).
     """
 
     names: tuple[str, ...] = ("v_ego", "headway", "v_lead")
     low: tuple[float, ...] = (0.0, 0.0, 0.0)  # [m/s, m, m/s]
     high: tuple[float, ...] = (32.0, 50.0, 32.0)  # [m/s, m, m/s]
     knee: tuple[float, ...] = ()  # [m/s, m, m/s]; empty or one per name, 0 = linear
+    knee_shape: Literal["log", "double"] = "log"
 
     def __post_init__(self) -> None:
         _check(len(self.names) >= 1, "names", "at least one observation dimension is needed")

@@ -117,8 +117,10 @@ class Shield:
         knee = np.array(cfg.observation.knee or [0.0] * self._dim)
         self._curved = knee > 0 if knee.any() else None  # the dimensions with a knee
         self._knee = np.where(knee > 0, knee, 1.0)
-        self._low = self._warp(np.array(cfg.observation.low))
-        self._range = self._warp(np.array(cfg.observation.high)) - self._low
+        self._double = cfg.observation.knee_shape == "double"
+        low, high = np.array(cfg.observation.low), np.array(cfg.observation.high)
+        self._low = self._warp(low)
+        self._range = high - low if self._double else self._warp(high) - self._low
         self._directions = [c.direction for c in cfg.criteria]
         self._a_max = max(abs(cfg.action.low), abs(cfg.action.high))
         self.reset()
@@ -158,16 +160,25 @@ class Shield:
         if self._curved is None:
             return warped
         k = self._knee
-        out: FloatArray = np.where(self._curved, np.sign(warped) * k * np.expm1(np.abs(warped) / k),
-                                   warped)
+        if self._double:
+            inner = np.abs(warped) <= 2 * k
+            unwarped = np.where(inner, warped / 2, warped - np.sign(warped) * k)
+        else:
+            unwarped = np.sign(warped) * k * np.expm1(np.abs(warped) / k)
+        out: FloatArray = np.where(self._curved, unwarped, warped)
         return out
 
     def _warp(self, x: FloatArray) -> FloatArray:
-        """The signed log ``k ln(1 + |x| / k)`` of each dimension with a knee k > 0."""
+        """Each dimension with a knee k > 0 through its shape: the signed log
+        ``k ln(1 + |x| / k)``, or ``x + clip(x, -k, k)`` (``double``)."""
         if self._curved is None:
             return x
         k = self._knee
-        out: FloatArray = np.where(self._curved, np.sign(x) * k * np.log1p(np.abs(x) / k), x)
+        if self._double:
+            warped = x + np.clip(x, -k, k)
+        else:
+            warped = np.sign(x) * k * np.log1p(np.abs(x) / k)
+        out: FloatArray = np.where(self._curved, warped, x)
         return out
 
     # --- one step --------------------------------------------------------------------------

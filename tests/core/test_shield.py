@@ -210,11 +210,19 @@ def test_states_view_reports_physical_centres() -> None:
     assert states["flag"] == [None] and states["visits"].tolist() == [1]
 
 
-def test_a_knee_keeps_the_views_in_physical_units() -> None:
-    shield = Shield(ShieldConfig.from_dict({"observation": {"knee": [0.0, 20.0, 0.0]}}))
+@pytest.mark.parametrize("shape", ["log", "double"])
+def test_a_knee_keeps_the_views_in_physical_units(shape: str) -> None:
+    shield = Shield(ShieldConfig.from_dict(
+        {"observation": {"knee": [0.0, 20.0, 0.0], "knee_shape": shape}}))
     shield.step([16.0, 100.0, 8.0], 0.0)
     assert shield.states()["centre"][0] == pytest.approx([16.0, 100.0, 8.0])
     assert shield.state_view(0)["centre"] == pytest.approx([16.0, 100.0, 8.0])
+
+
+def test_a_bad_knee_shape_names_its_field() -> None:
+    with pytest.raises(ShieldError) as raised:
+        ShieldConfig.from_dict({"observation": {"knee_shape": "square"}})
+    assert raised.value.field == "observation.knee_shape"
 
 
 @pytest.mark.parametrize("knee", [[20.0], [0.0, -1.0, 0.0], [0.0, math.inf, 0.0]])
