@@ -149,8 +149,8 @@ class Shield:
         return self.clusterer.n_states
 
     def normalise(self, observation: FloatArray) -> FloatArray:
-        """Physical units to the clustering space: ``(z - low) / (high - low)``, each term
-        through its dimension's knee first."""
+        """Physical units to the clustering space: ``(z - low) / (high - low)``, z and low
+        through their dimension's knee first (and high too, for the log knee)."""
         z: FloatArray = (self._warp(observation) - self._low) / self._range
         return z
 
