@@ -393,7 +393,7 @@ def children(pid: int) -> list[int]:
     """The live (not zombie) processes whose parent is ``pid``."""
     pids = (int(entry.name) for entry in Path("/proc").iterdir() if entry.name.isdigit())
     return [child for child in pids
-            if alive(child) and (state := process_state(child)) and state[1] == pid]
+            if (state := process_state(child)) and state[0] != "Z" and state[1] == pid]
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="the workers' parent-death signal is Linux's")
