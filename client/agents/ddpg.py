@@ -191,10 +191,12 @@ class DDPG:
         self.critic_opt.zero_grad()
         critic_loss.backward()  # type: ignore[no-untyped-call]
         self.critic_opt.step()
+        self.critic.requires_grad_(False)  # the actor's loss needs no critic gradients
         actor_loss = -self.critic(batch.obs, self.actor(batch.obs)).mean()
         self.actor_opt.zero_grad()
         actor_loss.backward()
         self.actor_opt.step()
+        self.critic.requires_grad_(True)
         with torch.no_grad():  # soft update: theta' <- theta' + tau (theta - theta')
             torch._foreach_lerp_(self._target, self._online, cfg.tau)
         return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item()}
