@@ -217,13 +217,17 @@ def demo(
     out: Path = Path("runs/demo"),
     transport: str = "ws",
     workers: Annotated[int, typer.Option(min=1)] = max(1, os.cpu_count() or 1),
+    lockstep: Annotated[bool, typer.Option(
+        help="Train the runs of each arm together, one batched update for all, the arms in "
+             "parallel: on two cores the longest arm then sets the pace, not both arms one "
+             "after the other.")] = True,
 ) -> None:
     """Start the shield service, train DDPG with and without it over the network, report."""
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=out) as tmp, service(Path(tmp) / "data") as url:
         typer.echo(f"shield service at {url}; {runs} runs x {episodes} episodes per arm")
         text = experiment("ddpg,ddpg+shield", runs, episodes, seed, url, transport, out,
-                          workers, None, "train")
+                          workers, None, "train", lockstep=runs if lockstep else 0)
     typer.echo(text)
     typer.echo(f"\nfigure: {out / 'figure.png'}; records and summary.json in {out}")
 

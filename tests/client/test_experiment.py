@@ -313,6 +313,19 @@ def test_lockstep_command(tmp_path: Path) -> None:
     assert "| ddpg | 3 | 6 |" in result.stdout and "| idm | 3 | 6 |" in result.stdout
 
 
+def test_the_demo_trains_both_arms_in_lockstep_against_its_own_service(tmp_path: Path) -> None:
+    result = cli("demo", "--runs", "2", "--episodes", "2", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert "| ddpg | 2 | 4 |" in result.stdout and "| ddpg+shield | 2 | 4 |" in result.stdout
+    assert (tmp_path / "figure.png").exists()
+    headers = [json.loads(path.read_text().splitlines()[0])["header"]
+               for path in (tmp_path / "records").glob("*.jsonl")]
+    assert len(headers) == 4
+    assert all(h["learning"]["lockstep"] for h in headers)
+    assert all(h["config"]["shield"].startswith("http://127.0.0.1:") for h in headers)
+    assert not list(tmp_path.glob("tmp*"))  # the service's data went with the service
+
+
 def test_the_command_stops_runs_outside_lockstep_at_its_deadline(tmp_path: Path) -> None:
     command = ("run", "--arms", "idm", "--runs", "2", "--episodes", "30", "--lead",
                "synthetic", "--workers", "1", "--out", str(tmp_path))
