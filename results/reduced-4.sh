@@ -6,7 +6,8 @@
 # spawned per run index), recomputed here. Rows: DDPG alone; the shield with one-sided
 # revisions off (ddpg-shield, recorded with `{}` while off was the default: commit c520107,
 # the last such, regenerates it; later code refuses to extend it); and one-sided revisions
-# (ddpg-shield-one-sided, today's default, asked for explicitly). One table:
+# (ddpg-shield-one-sided, today's default, asked for explicitly); and the double knee
+# (ddpg-shield-knee-double, tuned by results/knee-double.sh on seeds 4 and 5). One table:
 # results/reduced/four-runs/four-runs.md. Resumable: finished experiments are skipped.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,5 +20,8 @@ run() {  # run OUT ARM [OVERRIDES]
 run ddpg ddpg
 [[ -d $out/ddpg-shield ]] || run ddpg-shield ddpg+shield '{"reviser": {"one_sided": false}}'
 run ddpg-shield-one-sided ddpg+shield '{"reviser": {"one_sided": true}}'
-.venv/bin/python -m client compare "$out"/{ddpg,ddpg-shield,ddpg-shield-one-sided} \
+run ddpg-shield-knee-double ddpg+shield \
+    '{"observation": {"knee": [0.0, 20.0, 0.0], "knee_shape": "double"}}'
+.venv/bin/python -m client compare \
+    "$out"/{ddpg,ddpg-shield,ddpg-shield-one-sided,ddpg-shield-knee-double} \
     --out "$out/four-runs.md"
