@@ -4,12 +4,13 @@
 # a shield service of its own over WebSocket (a sidecar per controller, in-memory models); all
 # 20 runs train in parallel processes, so it wants 16 cores or more.
 #
-#   results/paper-protocol.sh [OUT]          (default OUT: results/paper-protocol-one-sided)
+#   results/paper-protocol.sh [OUT]          (default OUT: results/paper-protocol-knee)
 #
 # results/paper-protocol holds the partial run made when the default normalised the headway by
 # 200 m; to continue that one, check out commit 1f428c5 and pass it as OUT. Likewise
-# results/paper-protocol-50m, made with epsilon 0.3: commit 083199b; and
-# results/paper-protocol-eps-0.15, made with one-sided revisions off: commit c520107.
+# results/paper-protocol-50m, made with epsilon 0.3: commit 083199b;
+# results/paper-protocol-eps-0.15, made with one-sided revisions off: commit c520107; and
+# results/paper-protocol-one-sided, made without the knee: commit 7cf2170.
 #
 # How the runs learn, and how they reach the shield:
 #
@@ -41,7 +42,7 @@
 # one of 10.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-out=${1:-results/paper-protocol-one-sided}
+out=${1:-results/paper-protocol-knee}
 runs=${RUNS:-10}
 episodes=${EPISODES:-1500}
 first_port=${PORT:-8300}

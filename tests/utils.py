@@ -42,7 +42,7 @@ def random_stream(seed: int, n: int, dim: int = 3) -> list[tuple[list[float], fl
     return steps
 
 
-CLIFF_OBSERVATION = ObservationSpec(names=("x",), low=(0.0,), high=(1.0,))
+CLIFF_OBSERVATION = ObservationSpec(names=("x",), low=(0.0,), high=(1.0,), knee=())
 
 
 def cliff_config(**reviser: Any) -> ShieldConfig:

@@ -232,6 +232,19 @@ def test_a_bad_knee_names_its_field(knee: list[float]) -> None:
     assert raised.value.field == "observation.knee"
 
 
+@pytest.mark.parametrize(("missing", "knee", "shape"), [
+    (("knee", "knee_shape"), (), "log"),  # stored before either existed: linear
+    (("knee_shape",), (0.0, 20.0, 0.0), "log"),  # stored before the double knee existed
+])
+def test_a_stored_configuration_keeps_the_knee_of_its_time(
+        missing: tuple[str, ...], knee: tuple[float, ...], shape: str) -> None:
+    stored = ShieldConfig.from_dict({"observation": {"knee_shape": "log"}}).to_dict()
+    for name in missing:
+        del stored["observation"][name]
+    observation = ShieldConfig.from_stored(stored).observation
+    assert (observation.knee, observation.knee_shape) == (knee, shape)
+
+
 def test_an_empty_model_has_empty_views_and_snapshots() -> None:
     shield = Shield()
     assert shield.transitions.matrix(0).shape == (0, 0)
