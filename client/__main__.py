@@ -11,6 +11,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 from typing import Annotated, NoReturn
 
@@ -190,9 +191,10 @@ def service(data_dir: Path) -> Iterator[str]:
         port = s.getsockname()[1]
     url = f"http://127.0.0.1:{port}"
     log = open(data_dir.parent / "shield.log", "wb")
-    process = subprocess.Popen(
+    process = subprocess.Popen(  # ends with this process, even one killed outright
         [sys.executable, "-m", "app", "serve", "--port", str(port), "--data-dir", str(data_dir),
-         "--fsync", "never", "--log-level", "warning"], stdout=log, stderr=subprocess.STDOUT)
+         "--fsync", "never", "--log-level", "warning"], stdout=log, stderr=subprocess.STDOUT,
+        preexec_fn=partial(runner.die_with_parent, os.getpid()))
     try:
         for _ in range(300):
             if process.poll() is not None:

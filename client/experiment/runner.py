@@ -634,10 +634,10 @@ class Lockstep:
         return [next(decisions[self.service_of[k]]) for k, _ in requests]
 
 
-def _die_with_parent(parent: int) -> None:
-    """A worker (or the progress queue's manager) ends with the process that started it, even
-    one killed outright: an orphan would go on appending to records that a restarted
-    experiment is writing too, or linger."""
+def die_with_parent(parent: int) -> None:
+    """A worker (or the progress queue's manager, or the demo's shield service) ends with the
+    process that started it, even one killed outright: an orphan would go on appending to
+    records that a restarted experiment is writing too, or linger."""
     if sys.platform == "linux":
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
@@ -672,9 +672,9 @@ def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None
                         for run in range(config.runs))
     context = multiprocessing.get_context("spawn")
     manager = SyncManager(ctx=context)
-    manager.start(_die_with_parent, (os.getpid(),))
+    manager.start(die_with_parent, (os.getpid(),))
     with manager, ProcessPoolExecutor(
-            workers, mp_context=context, initializer=_die_with_parent,
+            workers, mp_context=context, initializer=die_with_parent,
             initargs=(os.getpid(),)) as pool:
         progress = manager.Queue()
         pending: set[Future[int]] = {pool.submit(job, *args, progress, trace)

@@ -437,6 +437,25 @@ def test_workers_end_with_a_killed_runner(tmp_path: Path) -> None:
     assert [pid for pid in spawned if alive(pid)] == []
 
 
+@pytest.mark.skipif(sys.platform != "linux", reason="the parent-death signal is Linux's")
+def test_the_demo_service_ends_with_a_killed_demo(tmp_path: Path) -> None:
+    process = subprocess.Popen(
+        [sys.executable, "-m", "client", "demo", "--runs", "1", "--episodes", "2000",
+         "--out", str(tmp_path)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob("records/*.jsonl")) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    services = [pid for pid in children(process.pid)
+                if b"app\0serve" in Path(f"/proc/{pid}/cmdline").read_bytes()]
+    assert len(services) == 1, "the demo did not start its service"
+    process.kill()
+    process.wait()
+    deadline = time.monotonic() + 10
+    while alive(services[0]) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not alive(services[0])
+
+
 def test_a_shielded_run_records_its_whole_shield_configuration(tmp_path: Path) -> None:
     """Overrides alone would not say what ``{}`` meant when the defaults were those of the
     code that ran: the header keeps the resolved configuration with the run's seed."""
