@@ -214,7 +214,7 @@ def service(data_dir: Path) -> Iterator[str]:
 @cli.command()
 def demo(
     runs: Annotated[int, typer.Option(min=1)] = 2,
-    episodes: Annotated[int, typer.Option(min=1)] = 200,
+    episodes: Annotated[int, typer.Option(min=1)] = 120,
     seed: int = 1000,
     out: Path = Path("runs/demo"),
     transport: str = "ws",
