@@ -1,5 +1,5 @@
-"""Print the states of shield models as Markdown: centre, spread, visits, failures by criterion
-and flag, and how many collisions were recognised in states that are not flagged now.
+"""Print the states of shield models as Markdown: centre, spread, visits, entries (where the
+model counted them), failures by criterion and flag, and how many collisions were recognised in states that are not flagged now.
 
     python results/states_table.py URL/models/NAME     a model on a shield service
     python results/states_table.py OUT                 every model in OUT/models/
@@ -21,10 +21,15 @@ from app.service import codec
 
 
 def view(model: dict[str, Any]) -> dict[str, Any]:
-    """What GET /models/{name} shows of an exact model, computed here."""
+    """What GET /models/{name} shows of an exact model, computed here (without entries where
+    the model was stored before they were counted)."""
     shield = Shield.from_snapshot(codec.from_json(model))
+    states = codec.readable(shield, "none")["states"]
+    if "entries" not in model["flags"]:
+        for s in states:
+            del s["entries"]
     return {"n_states": shield.n_states, "episodes": shield.counters.episodes,
-            "config": shield.config.to_dict(), **codec.readable(shield, "none")}
+            "config": shield.config.to_dict(), "states": states}
 
 
 def collisions(states: list[dict[str, Any]], unflagged: bool = False) -> int:
@@ -33,25 +38,31 @@ def collisions(states: list[dict[str, Any]], unflagged: bool = False) -> int:
 
 
 def table(snapshot: dict[str, Any]) -> str:
+    """One model's states; the entries column only where the model counted them."""
+    entries = "entries" in snapshot["states"][0] if snapshot["states"] else False
     lines = [
         f"{snapshot['n_states']} states after {snapshot['episodes']} episodes",
         "",
-        "| state | v_ego (m/s) | headway (m) | v_lead (m/s) | spread | visits | collisions "
-        "| large distances | flag |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "| state | v_ego (m/s) | headway (m) | v_lead (m/s) | spread | visits | "
+        + ("entries | " if entries else "") + "collisions | large distances | flag |",
+        "|---:|---:|---:|---:|---:|---:|" + ("---:|" if entries else "") + "---:|---:|---|",
     ]
     for s in snapshot["states"]:
         v_ego, headway, v_lead = s["centre"]
         f = s["failures"]
         lines.append(f"| {s['index']} | {v_ego:.1f} | {headway:.1f} | {v_lead:.1f} "
-                     f"| {s['spread']:.3f} | {s['visits']} | {f['collision']} "
-                     f"| {f['large_distance']} | {s['flag'] or '-'} |")
+                     f"| {s['spread']:.3f} | {s['visits']} | "
+                     + (f"{s['entries']} | " if entries else "")
+                     + f"{f['collision']} | {f['large_distance']} | {s['flag'] or '-'} |")
     states = snapshot["states"]
-    rate = snapshot["config"]["reviser"].get("flag_min_rate")
+    reviser = snapshot["config"]["reviser"]
+    rate = reviser.get("flag_min_rate")
+    per = reviser.get("flag_rate_per", "recognition")
     lines += ["", f"{collisions(states, unflagged=True)} of {collisions(states)} collisions "
                   f"were recognised in states not "
-                  f"flagged now (flags: {snapshot['config']['reviser']['flags']}"
-                  + (f", min rate {rate}" if rate is not None else "") + ")"]
+                  f"flagged now (flags: {reviser['flags']}"
+                  + (f", min rate {rate}" if rate is not None else "")
+                  + (f" per {per}" if per != "recognition" else "") + ")"]
     return "\n".join(lines) + "\n"
 
 

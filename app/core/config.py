@@ -184,6 +184,11 @@ class ReviserConfig:
     # (results/README.md, tuned on seeds 0-1)
     flags: Literal["sticky", "overwrite", "rate"] = "rate"
     flag_min_rate: float = 0.002  # "rate" flags: failures per recognition that flag a state
+    # What "rate" flags count failures against: every recognition of the state, or only the
+    # entries into it (a stream's step that recognises it after another state, or first). A
+    # state where cars wait stopped behind a stopped lead is recognised for minutes per visit,
+    # which dilutes the crashes that end there (results/README.md, "Flag rates per entry")
+    flag_rate_per: Literal["recognition", "entry"] = "recognition"
     # Not in the paper: a revision never goes past the proposal the wrong way. Alg. 2 returns
     # the chosen bin's midpoint plus noise, so against a collision it can brake less than the
     # controller asked (at full braking, bin 0's midpoint -1.9 plus noise of std 1.41). On by

@@ -1,4 +1,4 @@
-"""Unfavourable-state flags L(s(i)), visit and failure counts (spec §5).
+"""Unfavourable-state flags L(s(i)), visit, entry and failure counts (spec §5).
 
 A flag is 0 (l_n, favourable) or ``1 + c`` for criterion ``c`` of the configuration, whose
 order is the priority (the paper: collision l_s before large distance l_ld).
@@ -15,20 +15,23 @@ from app.core._arrays import ensure_capacity
 
 IntArray = npt.NDArray[np.int64]
 FlagMode = Literal["sticky", "overwrite", "rate"]
+RatePer = Literal["recognition", "entry"]
 NO_FLAG = 0
 
 
 class StateFlags:
-    """The flag, the number of recognitions and the failures of every state."""
+    """The flag, the number of recognitions and entries and the failures of every state."""
 
     def __init__(self, mode: FlagMode, max_states: int, n_criteria: int,
-                 min_rate: float) -> None:
+                 min_rate: float, rate_per: RatePer) -> None:
         self.mode = mode
         self.max_states = max_states
         self.min_rate = min_rate
+        self.rate_per = rate_per
         self._n = 0
         self._flags = np.zeros(0, dtype=np.int64)
         self._visits = np.zeros(0, dtype=np.int64)
+        self._entries = np.zeros(0, dtype=np.int64)
         self._failures = np.zeros((0, n_criteria), dtype=np.int64)
         self._flagged: tuple[IntArray, IntArray] | None = None
 
@@ -41,6 +44,12 @@ class StateFlags:
     def visits(self) -> npt.NDArray[np.int64]:
         """How often each state was the recognised one (read-only view)."""
         return _read_only(self._visits[: self._n])
+
+    @property
+    def entries(self) -> npt.NDArray[np.int64]:
+        """How often a stream came into each state from another one, or began there
+        (read-only view)."""
+        return _read_only(self._entries[: self._n])
 
     @property
     def failures(self) -> npt.NDArray[np.int64]:
@@ -59,19 +68,24 @@ class StateFlags:
         n = self._n
         self._flags = ensure_capacity(self._flags, n + 1, self.max_states)
         self._visits = ensure_capacity(self._visits, n + 1, self.max_states)
+        self._entries = ensure_capacity(self._entries, n + 1, self.max_states)
         self._failures = ensure_capacity(self._failures, n + 1, self.max_states)
         self._n = n + 1
 
-    def observe(self, state: int, criterion: int | None) -> None:
-        """Count a recognition of ``state`` (and its failure, if any) and flag it (A4).
+    def observe(self, state: int, criterion: int | None, entered: bool = True) -> None:
+        """Count a recognition of ``state`` (an entry too, if ``entered``; and its failure, if
+        any) and flag it (A4).
 
         ``sticky`` [REC]: an unfavourable flag is only replaced by one of higher priority.
         ``overwrite``: the literal re-flagging of the recognised state on every step.
         ``rate`` (A4 c, count-based): the state carries the highest-priority criterion whose
-        failures make up at least ``min_rate`` of its recognitions, so that a state which
-        covers much ordinary driving is not condemned by one failure at its edge.
+        failures make up at least ``min_rate`` of its recognitions (or of its entries, by
+        ``rate_per``), so that a state which covers much ordinary driving is not condemned by
+        one failure at its edge.
         """
         self._visits[state] += 1
+        if entered:
+            self._entries[state] += 1
         if criterion is not None:
             self._failures[state, criterion] += 1
         old = int(self._flags[state])
@@ -87,25 +101,30 @@ class StateFlags:
 
     def _rate_flag(self, state: int) -> int:
         failures = self._failures[state]
-        frequent = np.flatnonzero(failures >= max(1.0, self.min_rate * self._visits[state]))
+        count = self._entries[state] if self.rate_per == "entry" else self._visits[state]
+        frequent = np.flatnonzero(failures >= max(1.0, self.min_rate * count))
         return int(frequent[0]) + 1 if frequent.size else NO_FLAG
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state."""
         return {"flags": self.flags.copy(), "visits": self.visits.copy(),
-                "failures": self.failures.copy()}
+                "entries": self.entries.copy(), "failures": self.failures.copy()}
 
     @classmethod
     def restore(cls, mode: FlagMode, max_states: int, n_criteria: int, min_rate: float,
-                data: dict[str, Any]) -> StateFlags:
-        """Rebuild from :meth:`snapshot` output."""
-        self = cls(mode, max_states, n_criteria, min_rate)
+                rate_per: RatePer, data: dict[str, Any]) -> StateFlags:
+        """Rebuild from :meth:`snapshot` output. Snapshots from before entries were counted
+        lack them: they count from the restore on."""
+        self = cls(mode, max_states, n_criteria, min_rate, rate_per)
         self._flags = np.array(data["flags"], dtype=np.int64).ravel()
         self._visits = np.array(data["visits"], dtype=np.int64).ravel()
         self._n = self._flags.shape[0]
+        entries = data.get("entries")
+        self._entries = (np.zeros(self._n, dtype=np.int64) if entries is None
+                         else np.array(entries, dtype=np.int64).ravel())
         self._failures = np.array(data["failures"], dtype=np.int64).reshape(self._n, n_criteria)
-        if self._visits.shape[0] != self._n:
-            raise ValueError("flags and visits disagree on the state count")
+        if self._visits.shape[0] != self._n or self._entries.shape[0] != self._n:
+            raise ValueError("flags, visits and entries disagree on the state count")
         return self
 
 

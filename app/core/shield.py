@@ -131,7 +131,7 @@ class Shield:
         self.clusterer = EvolvingClusterer(cfg.clustering, self._dim, cfg.limits.max_states)
         self.transitions: TransitionModel = self._new_transitions()
         self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria),
-                                cfg.reviser.flag_min_rate)
+                                cfg.reviser.flag_min_rate, cfg.reviser.flag_rate_per)
         self.streams: dict[str, StreamState] = {}
         self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria})
         self._rng = np.random.default_rng(cfg.reviser.seed)
@@ -296,7 +296,8 @@ class Shield:
         self._learn_transition(state, belief, update.is_new, step.applied_action)
         # §5 flags on the recognised state
         recognised = belief.argmax()
-        self.flags.observe(recognised, step.event)
+        entered = state.belief is None or state.belief.argmax() != recognised
+        self.flags.observe(recognised, step.event, entered)
         self.counters.steps += 1
         self.counters.model_version += 1
 
@@ -439,20 +440,22 @@ class Shield:
     # --- views and persistence -------------------------------------------------------------
 
     def states(self) -> dict[str, Any]:
-        """Every state: centre in physical units, spread (normalised std), flag, visits, and
-        failures (states x criteria)."""
+        """Every state: centre in physical units, spread (normalised std), flag, visits,
+        entries, and failures (states x criteria)."""
         names = [None] + [c.name for c in self.config.criteria]
         return {
             "centre": self.physical(self.clusterer.centres),
             "spread": np.sqrt(self.clusterer.variances()),
             "flag": [names[f] for f in self.flags.flags],
             "visits": self.flags.visits.copy(),
+            "entries": self.flags.entries.copy(),
             "failures": self.flags.failures.copy(),
             "support": self.clusterer.support,
         }
 
     def state_view(self, index: int) -> dict[str, Any]:
-        """One state: centre in physical units, spread, flag, visits, failures by criterion."""
+        """One state: centre in physical units, spread, flag, visits, entries, failures by
+        criterion."""
         names = [None] + [c.name for c in self.config.criteria]
         failures = self.flags.failures[index]
         return {
@@ -461,6 +464,7 @@ class Shield:
             "spread": float(np.sqrt(self.clusterer.variances()[index])),
             "flag": names[int(self.flags.flags[index])],
             "visits": int(self.flags.visits[index]),
+            "entries": int(self.flags.entries[index]),
             "failures": {c.name: int(f) for c, f in zip(self.config.criteria, failures,
                                                          strict=True)},
         }
@@ -536,7 +540,8 @@ class Shield:
             self.transitions = LazyTransitions.restore(cfg.action.n_bins, cfg.transitions,
                                                        limit, tpm)
         self.flags = StateFlags.restore(cfg.reviser.flags, limit, len(cfg.criteria),
-                                        cfg.reviser.flag_min_rate, data["flags"])
+                                        cfg.reviser.flag_min_rate, cfg.reviser.flag_rate_per,
+                                        data["flags"])
         n = self.clusterer.n_states
         if self.transitions.n_states != n or self.flags.flags.shape[0] != n:
             raise InvalidSnapshot("states, matrices and flags disagree on the state count")

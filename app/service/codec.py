@@ -95,6 +95,7 @@ def readable(shield: Shield, tpm: str = "sparse", action: int | None = None,
                 "spread": float(states["spread"][i]),
                 "flag": states["flag"][i],
                 "visits": int(states["visits"][i]),
+                "entries": int(states["entries"][i]),
                 "failures": dict(zip(criteria, states["failures"][i].tolist(), strict=True)),
             }
             for i in range(shield.n_states)

@@ -53,6 +53,9 @@ def test_episodes_flags_and_counters_through_the_api(client: TestClient) -> None
     assert "collision" in [s["flag"] for s in snap["states"]]
     assert sum(s["failures"]["collision"] for s in snap["states"]) == 1
     assert sum(s["visits"] for s in snap["states"]) == 7
+    visited = [d["state"] for d in decisions]
+    entered = 1 + sum(a != b for a, b in zip(visited, visited[1:], strict=False))
+    assert sum(s["entries"] for s in snap["states"]) == entered
 
 
 def test_models_lifecycle(client: TestClient) -> None:

@@ -177,6 +177,19 @@ def test_a_snapshot_from_before_a_switch_restores_with_the_behaviour_of_its_time
     assert restored == original
 
 
+def test_a_snapshot_from_before_entries_were_counted_restores_and_counts_on() -> None:
+    shield = Shield(cliff_config(activate_after_episodes=5))
+    run_cliff(shield, 30, seed=4)
+    old = shield.snapshot()
+    del old["flags"]["entries"]
+    copy = Shield.from_snapshot(old)
+    assert copy.flags.entries.tolist() == [0] * copy.n_states
+    _, original = run_cliff(shield, 30, seed=9)
+    _, restored = run_cliff(copy, 30, seed=9)
+    assert restored == original  # recognitions decide by default, as before
+    assert copy.flags.entries.sum() > 0
+
+
 def test_a_damaged_snapshot_is_refused() -> None:
     data = Shield().snapshot()
     with pytest.raises(InvalidSnapshot):

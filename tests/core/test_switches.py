@@ -135,6 +135,30 @@ def test_a4_rate_flags_follow_the_share_of_failures_among_recognitions() -> None
     assert shield.state_view(0)["failures"] == {"collision": 2, "large_distance": 1}
 
 
+def test_a4_rate_flags_per_entry_are_not_diluted_by_a_long_stay() -> None:
+    """Counted per entry, a crash after a long stay in one state flags it, and the flag lifts
+    only as streams keep coming into the state without failing; counted per recognition, the
+    stay itself dilutes the crash below the rate."""
+    flags = {}
+    for per in ("recognition", "entry"):
+        shield = shield_with(reviser=ReviserConfig(flag_min_rate=0.1, flag_rate_per=per))  # type: ignore[arg-type]
+        for _ in range(20):
+            shield.step([1.0], 0.0)
+        shield.step([1.0], None, event="collision", done=True)
+        flags[per] = int(shield.flags.flags[0])
+    assert flags == {"recognition": 0, "entry": 1}  # 1 crash in 21 recognitions, 1 entry
+    assert shield.state_view(0)["visits"] == 21 and shield.state_view(0)["entries"] == 1
+
+    for _ in range(9):  # in and out again: the stream's first step is an entry too
+        shield.step([0.0], 0.0)
+        shield.step([1.0], 0.0)
+    assert shield.n_states == 2 and shield.states()["entries"].tolist() == [10, 9]
+    assert shield.flags.flags[0] == 1  # 1 crash in 10 entries: exactly 10%
+    shield.step([0.0], 0.0)
+    shield.step([1.0], 0.0)
+    assert shield.flags.flags[0] == 0  # 1 in 11
+
+
 def diffuse_prediction_shield(rule: str) -> Shield:
     """State 0 favourable, state 1 flagged; untried actions predict 50/50."""
     shield = shield_with(reviser=ReviserConfig(inspect=rule, activate_after_episodes=0))  # type: ignore[arg-type]
