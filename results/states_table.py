@@ -1,5 +1,6 @@
 """Print the states of shield models as Markdown: centre, spread, visits, entries (where the
-model counted them), failures by criterion and flag, and how many collisions were recognised in states that are not flagged now.
+model counted them), failures by criterion and flag, and how many collisions were recognised
+in states that are not flagged now.
 
     python results/states_table.py URL/models/NAME     a model on a shield service
     python results/states_table.py OUT                 every model in OUT/models/
