@@ -187,7 +187,8 @@ class ReviserConfig:
     # What "rate" flags count failures against: every recognition of the state, or only the
     # entries into it (a stream's step that recognises it after another state, or first). A
     # state where cars wait stopped behind a stopped lead is recognised for minutes per visit,
-    # which dilutes the crashes that end there (results/README.md, "Flag rates per entry")
+    # which dilutes the crashes that end there (results/README.md, "Sticky flags, or flags
+    # per entry")
     flag_rate_per: Literal["recognition", "entry"] = "recognition"
     # Not in the paper: a revision never goes past the proposal the wrong way. Alg. 2 returns
     # the chosen bin's midpoint plus noise, so against a collision it can brake less than the

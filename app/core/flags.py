@@ -72,7 +72,7 @@ class StateFlags:
         self._failures = ensure_capacity(self._failures, n + 1, self.max_states)
         self._n = n + 1
 
-    def observe(self, state: int, criterion: int | None, entered: bool = True) -> None:
+    def observe(self, state: int, criterion: int | None, entered: bool) -> None:
         """Count a recognition of ``state`` (an entry too, if ``entered``; and its failure, if
         any) and flag it (A4).
 
