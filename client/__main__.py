@@ -160,10 +160,13 @@ def compare_command(
     episodes: Annotated[int | None, typer.Option(
         min=1, help="Only each run's first N episodes (runs stopped at different points).")]
     = None,
+    blocks: Annotated[bool, typer.Option(
+        help="Also a table per block of 100 episodes, the rows side by side in each cell.")]
+    = False,
 ) -> None:
     """One table over the experiments in DIRECTORIES (ablations): a row per directory and arm."""
     try:
-        text = report.compare(directories, episodes)
+        text = report.compare(directories, episodes, blocks)
     except RecordError as error:
         fail(str(error))
     if out is not None:

@@ -227,10 +227,30 @@ def labels(directories: list[Path]) -> list[str]:
     return [str(d.relative_to(common)) for d in resolved]
 
 
-def compare(directories: list[Path], limit: int | None = None) -> str:
+def side_by_side(summary: dict[str, Any]) -> str:
+    """The rows of ``summary`` per block of 100 episodes, side by side in each cell: how
+    experiments differ as learning goes on, which the pooled table averages away."""
+    names = list(summary)
+    blocks = [{int(b["episodes"].split("-")[0]): b for b in s["per_100_episodes"]}
+              for s in summary.values()]
+    columns = (("success_rate", "{:.1%}"), ("large_distance", "{}"), ("collision", "{}"),
+               ("interventions_per_episode", "{:.1f}"))
+    lines = [f"Per block of 100 episodes, each cell {' / '.join(names)}:", "",
+             "| episodes | success | large distance | collision | interventions per episode |",
+             "|---|---|---|---|---|"]
+    for start in sorted(set().union(*blocks)):
+        cells = [b.get(start) for b in blocks]
+        spans = " / ".join(dict.fromkeys(c["episodes"] for c in cells if c is not None))
+        values = [" / ".join("-" if c is None else form.format(c[key]) for c in cells)
+                  for key, form in columns]
+        lines.append(f"| {spans} | {' | '.join(values)} |")
+    return "\n".join(lines)
+
+
+def compare(directories: list[Path], limit: int | None = None, blocks: bool = False) -> str:
     """One table over several experiments (ablations): a row per directory and arm, with the
     shield configuration each was run with; of each run's first ``limit`` episodes, if
-    given."""
+    given; with ``blocks``, also the rows per block of 100 episodes side by side."""
     summary: dict[str, Any] = {}
     notes: dict[str, str] = {}
     for directory, name in zip(directories, labels(directories), strict=True):
@@ -242,7 +262,8 @@ def compare(directories: list[Path], limit: int | None = None) -> str:
             label = f"{name}: {arm}"
             summary[label] = row
             notes[label] = f"`{overrides}`" if "+" in arm else "-"
-    return table(summary, notes)
+    text = table(summary, notes)
+    return f"{text}\n\n{side_by_side(summary)}" if blocks else text
 
 
 def figure(episodes: list[EpisodeRecord], path: Path) -> None:

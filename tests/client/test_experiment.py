@@ -133,6 +133,26 @@ def test_summary_numbers_by_hand() -> None:
     assert (run["episodes"], run["never_fails_after"]) == (150, 7)
 
 
+def test_blocks_side_by_side_align_by_episode() -> None:
+    long = [record(0, e, "collision" if e in (1, 150) else "success") for e in range(1, 201)]
+    short = [record(0, e, "large_distance" if e == 2 else "success") for e in range(1, 121)]
+    text = report.side_by_side({"long": report.summarise(long)["a"],
+                                "short": report.summarise(short)["a"]})
+    assert text.splitlines()[0] == "Per block of 100 episodes, each cell long / short:"
+    assert text.splitlines()[4:] == [
+        "| 1-100 | 99.0% / 99.0% | 0 / 1 | 1 / 0 | 1.0 / 1.0 |",
+        "| 101-200 / 101-120 | 99.0% / 100.0% | 0 / 0 | 1 / 0 | 1.0 / 1.0 |",
+    ]
+    only_long = report.side_by_side({"short": report.summarise(short)["a"],
+                                     "long": report.summarise(long)["a"]})
+    assert "| 101-120 / 101-200 | 100.0% / 99.0% |" in only_long
+    late = [record(0, e, "success") for e in range(101, 111)]
+    gap = report.side_by_side({"early": report.summarise(short[:50])["a"],
+                               "late": report.summarise(late)["a"]})
+    assert gap.splitlines()[4:] == ["| 1-50 | 98.0% / - | 1 / - | 0 / - | 1.0 / - |",
+                                    "| 101-110 | - / 100.0% | - / 0 | - / 0 | - / 1.0 |"]
+
+
 def test_report_writes_summary_table_and_figure(tmp_path: Path) -> None:
     runner.run_one(CONFIG, "idm-aggressive", 0, tmp_path)
     text, summary = report.write(tmp_path)
@@ -374,6 +394,11 @@ def test_compare_puts_experiments_side_by_side(tmp_path: Path) -> None:
     assert first.returncode == 0, first.stderr
     counts = [row.split(" | ")[1:3] for row in first.stdout.splitlines() if ": idm" in row]
     assert counts == [["1", "1"]] * 4  # runs, episodes: each run's first episode only
+    blocks = cli("compare", str(tmp_path / "default"), str(tmp_path / "overwrite"), "--blocks")
+    assert blocks.returncode == 0, blocks.stderr
+    assert blocks.stdout.startswith(result.stdout.rstrip("\n") + "\n\nPer block of 100")
+    [row] = [line for line in blocks.stdout.splitlines() if line.startswith("| 1-2 |")]
+    assert row.count(" / ") == 4 * 3  # four rows in each of four columns; one span of episodes
     too_many = cli("compare", str(tmp_path / "default"), "--episodes", "3")
     assert too_many.returncode == 2 and "--episodes must be at most 2" in too_many.stderr
 
