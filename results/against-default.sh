@@ -19,4 +19,4 @@ out=results/tuning/$name
     --out "$out/seed-$seed" --runs 4 --episodes 600 --seed "$seed" --shield local --lockstep \
     --workers 1 ${STOP_AFTER:+--stop-after "$STOP_AFTER"} >/dev/null
 .venv/bin/python -m client compare "results/tuning/${BASELINE:-knee-double}/seed-$seed" \
-    "$out/seed-$seed" ${EPISODES:+--episodes "$EPISODES"} --out "$out/$name-seed-$seed.md"
+    "$out/seed-$seed" ${EPISODES:+--episodes "$EPISODES"} --blocks --out "$out/$name-seed-$seed.md"
