@@ -32,6 +32,9 @@
 #                  not finished are unpacked to go on). Groups also save every 10 minutes, so
 #                  a crash loses at most that much
 #   ARMS="..."     the arms to run (default "ddpg ddpg+shield")
+#   SHIELD_CONFIG=JSON  overrides of the default shield configuration (client run
+#                  --shield-config), e.g. '{"reviser": {"flags": "sticky"}}'; give OUT a
+#                  folder of its own
 #   LOG_LEVEL=L    the services' log level (default warning; info logs every request)
 #
 # The two arms run as two `client run` commands side by side, so their groups can differ. On
@@ -101,6 +104,7 @@ fi
         echo "gpu: $(nvidia-smi --query-gpu=name --format=csv,noheader | head -1)"
     fi
     echo "runs: $runs x $episodes episodes per arm; $how; $services shield service(s), $transport"
+    echo "shield overrides: ${SHIELD_CONFIG:-{\}}"
 } >>"$out/machine.txt"
 start=$(date +%s)
 arms=()
@@ -109,7 +113,7 @@ for arm in ${ARMS:-ddpg ddpg+shield}; do
     # shellcheck disable=SC2046  # the options are words
     "$PYTHON" -m client run --arms "$arm" --runs "$runs" --episodes "$episodes" --seed 1000 \
         --shield "$(IFS=,; echo "${urls[*]}")" --transport "$transport" \
-        $(arm_options "$size") --out "$out" &
+        --shield-config "${SHIELD_CONFIG:-{\}}" $(arm_options "$size") --out "$out" &
     arms+=($!)
     pids+=($!)  # stopping the script stops the arms too
 done

@@ -530,17 +530,21 @@ def test_the_paper_protocol_script_runs_every_shielded_run_on_its_own_service(
 
 def test_the_paper_protocol_script_trains_in_lockstep_groups_against_batch_services(
         tmp_path: Path) -> None:
-    """LOCKSTEP=1 TRANSPORT=batch SERVICES=2: the shielded runs' models spread over two
-    services, the arms train in lockstep groups of their own sizes, and machine.txt says so."""
+    """LOCKSTEP=1 TRANSPORT=batch SERVICES=2 SHIELD_CONFIG: the shielded runs' models spread
+    over two services with the overrides, the arms train in lockstep groups of their own
+    sizes, and machine.txt says so."""
     root = Path(__file__).resolve().parents[2]
     port = free_port()
     env = {**os.environ, "RUNS": "3", "EPISODES": "2", "PORT": str(port),
            "PYTHON": sys.executable, "LOCKSTEP": "1", "GROUP": "2", "DDPG_GROUP": "3",
-           "TRANSPORT": "batch", "SERVICES": "2", "LOG_LEVEL": "info"}
+           "TRANSPORT": "batch", "SERVICES": "2", "LOG_LEVEL": "info",
+           "SHIELD_CONFIG": '{"reviser": {"flags": "sticky"}}'}
     result = subprocess.run(["bash", str(root / "results/paper-protocol.sh"), str(tmp_path)],
                             env=env, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     headers, episodes = records.read_all(tmp_path)
+    assert all(h["config"]["shield_config"] == {"reviser": {"flags": "sticky"}} for h in headers)
+    assert {h["shield"]["reviser"]["flags"] for h in headers if h["shield"]} == {"sticky"}
     assert {h["config"]["shield"] for h in headers} == {
         f"http://127.0.0.1:{port},http://127.0.0.1:{port + 1}"}
     assert {h["config"]["transport"] for h in headers} == {"batch"}
@@ -552,6 +556,7 @@ def test_the_paper_protocol_script_trains_in_lockstep_groups_against_batch_servi
     machine = (tmp_path / "machine.txt").read_text()
     assert "ddpg in groups of 3 runs, ddpg+shield in groups of 2" in machine
     assert "2 shield service(s), batch" in machine and "wall:" in machine
+    assert 'shield overrides: {"reviser": {"flags": "sticky"}}' in machine
     for offset in (0, 1):
         with pytest.raises(httpx.TransportError):
             httpx.get(f"http://127.0.0.1:{port + offset}/healthz", timeout=1)
