@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# A two-step prediction on today's default (count-based flags, the double knee). Why: a
+# revision comes when the next step's prediction (0.25 s ahead) reaches a flagged state, too
+# late when closing fast (results/README.md, "Sticky flags, or flags per entry"); with sticky
+# flags a second step of the marginal TPM (spec A11) cut collisions early on a tuning seed
+# (results/sticky-horizon.sh), but sticky flags themselves left four of ten runs of the
+# paper's protocol falling behind (results/README.md, "The paper's protocol with sticky
+# flags"). This tries the horizon with the flags that lift.
+# SEED=4 (default) or 5, STOP_AFTER, EPISODES: as results/against-default.sh says; writes
+# results/tuning/horizon-2.
+exec "$(dirname "$0")/against-default.sh" horizon-2 '{"reviser": {"horizon": 2}}'
