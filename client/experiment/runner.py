@@ -113,12 +113,41 @@ def run_seeds(seed: int, runs: int) -> list[int]:
 
 
 def versions() -> dict[str, str]:
+    """The libraries and the processor a run computed with: floating point can come out
+    differently on another processor or build, and then a run does not replay."""
     import gymnasium
     import torch
 
     return {"shield": app.__version__, "python": platform.python_version(),
             "numpy": np.__version__, "torch": torch.__version__,
-            "gymnasium": gymnasium.__version__}
+            "gymnasium": gymnasium.__version__,
+            "cpu": f"{processor()} ({torch.backends.cpu.get_cpu_capability()})"}
+
+
+def processor() -> str:
+    """The processor's model name, where the system tells it."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            names = [line.partition(":")[2].strip() for line in f
+                     if line.startswith("model name")]
+    except OSError:
+        names = []
+    return names[0] if names else platform.processor() or platform.machine()
+
+
+def replay_mismatch(path: Path, episode: int) -> str:
+    """Why a recorded episode came out differently: the libraries or the processor that
+    wrote the records, where they differ from this machine's, else a change of the code."""
+    written = records.read(path)[0].get("versions") or {}
+    here = versions()
+    changed = [f"{name} {written.get(name, 'not recorded')} there, {value} here"
+               for name, value in here.items() if written.get(name) != value]
+    if changed:
+        cause = f"written with {'; '.join(changed)}: arithmetic differs between machines and builds"
+    else:
+        cause = "written with these libraries on this processor: the code has changed since"
+    return (f"{path}: episode {episode} did not replay identically ({cause}); go on where it "
+            f"was written, or start again with another --out")
 
 
 class Controller(Protocol):
@@ -302,7 +331,7 @@ class Run:
             old = self.recorded[episode - 1]
             if (old.steps, old.outcome, old.interventions) != (
                     record.steps, record.outcome, record.interventions):
-                raise RecordError(f"{self.path}: episode {episode} did not replay identically")
+                raise RecordError(replay_mismatch(self.path, episode))
             return
         records.append(self.path, record)
         self.appended += 1

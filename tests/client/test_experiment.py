@@ -227,6 +227,30 @@ def test_a_stopped_run_goes_on_by_replaying(tmp_path: Path) -> None:
         without_wall(records.read(records.path_for(whole, arm, 0))[1])
 
 
+def test_a_run_that_does_not_replay_says_what_differs(tmp_path: Path) -> None:
+    """Floating point can come out differently on another processor or build, so records
+    written elsewhere may not replay here: the refusal names what differs, and blames the
+    code only when the libraries and the processor are the same."""
+    arm = "idm-aggressive"
+    runner.run_one(CONFIG, arm, 0, tmp_path)
+    path = records.path_for(tmp_path, arm, 0)
+    header, *episodes = [json.loads(line) for line in path.read_text().splitlines()[:4]]
+    episodes[1]["steps"] += 1  # episode 2 as another machine might have played it
+
+    def write(versions: dict[str, str]) -> None:
+        lines = [{"header": {**header["header"], "versions": versions}}, *episodes]
+        path.write_text("".join(json.dumps(line) + "\n" for line in lines))
+
+    write({**runner.versions(), "cpu": "Another CPU (AVX512)"})
+    with pytest.raises(records.RecordError, match=r"episode 2 did not replay identically "
+                       r"\(written with cpu Another CPU \(AVX512\) there, .+ here: arithmetic"):
+        runner.run_one(CONFIG, arm, 0, tmp_path)
+    write(runner.versions())
+    with pytest.raises(records.RecordError, match="the code has changed since"):
+        runner.run_one(CONFIG, arm, 0, tmp_path)
+    assert len(records.read(path)[1]) == 3  # refused, nothing appended
+
+
 def test_a_gzipped_run_goes_on_unpacked(tmp_path: Path) -> None:
     """Committed results are gzipped; running the experiment again unpacks an unfinished run
     and goes on, replaying what was recorded, and leaves a finished one packed (a damaged
