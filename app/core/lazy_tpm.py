@@ -26,6 +26,7 @@ import numpy.typing as npt
 from app.core._arrays import ensure_capacity
 from app.core.belief import Belief
 from app.core.config import TransitionConfig
+from app.core.tpm import marginal_by_action
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -209,6 +210,47 @@ class LazyTransitions:
             pred[rows] += c
         return pred
 
+    def predict_marginal(self, belief: Belief, transpose: bool) -> FloatArray:
+        """Eq. 7's step: Eq. 5 under the marginal TPM, ``(1/q) sum_r P^r``.
+
+        The transposed form runs every action at once, with the arithmetic of
+        :meth:`predict` per action and the same sum in action order, so that it gives the
+        numbers of :func:`marginal_by_action` bit for bit at a fraction of the cost (the
+        two-step prediction makes q predictions per inspected action).
+        """
+        if not transpose:
+            return marginal_by_action(self, belief, transpose)
+        n, q, rows, p = self._n, self.n_actions, belief.index, belief.prob
+        learned = p * self._learned_scale[:, rows]  # (q, k)
+        # the belief rows of every action side by side, and one weighted bincount over
+        # (action, column) bins: it sums each action's entries in the order its own would
+        widths = [v.shape[1] for v in self._vals]
+        vals = np.concatenate([v.take(rows, axis=0) for v in self._vals], axis=1)
+        vals *= learned.T.repeat(widths, axis=1)
+        bins = np.concatenate([c.take(rows, axis=0) for c in self._cols], axis=1)
+        bins += (np.arange(q, dtype=np.int32) * n).repeat(widths)
+        # (with nothing learned yet bincount answers in integers)
+        counts = np.bincount(bins.ravel(), weights=vals.ravel(), minlength=q * n)
+        pred: FloatArray = counts.astype(np.float64, copy=False).reshape(q, n)
+        c = p * self._pad_scale[:, rows]
+        mode = self.config.expansion
+        if mode == "prior":
+            below = np.zeros((q, rows.size + 1))
+            c.cumsum(axis=1, out=below[:, 1:])
+            weighted = _suffix_sums(c * self._pad[:, rows])
+            segment = belief.segments(n)
+            pred += (self._pad[:, :n] * below.repeat(segment, axis=1)
+                     + weighted.repeat(segment, axis=1))
+        elif mode == "zero_uniform":
+            pred += _suffix_sums(c).repeat(belief.segments(n), axis=1)
+        else:
+            pred[:, rows] += c
+        total = np.zeros(n)
+        for row in pred:  # in action order, as marginal_by_action adds them
+            total += row
+        mean: FloatArray = total / q
+        return mean
+
     def _predict_literal(self, belief: Belief, a: int) -> FloatArray:
         n = self._n
         p = belief.dense(n)
@@ -340,7 +382,8 @@ def _log_norm(log_pad: FloatArray, offset: Any, row_sum: FloatArray) -> FloatArr
 
 
 def _suffix_sums(x: FloatArray) -> FloatArray:
-    """``out[i] = sum_{m >= i} x[m]``, with a trailing 0: sums over rows at or after i."""
-    out = np.zeros(x.size + 1)
-    x[::-1].cumsum(out=out[-2::-1])
+    """``out[..., i] = sum_{m >= i} x[..., m]``, with a trailing 0: sums over rows at or
+    after i (along the last axis)."""
+    out = np.zeros((*x.shape[:-1], x.shape[-1] + 1))
+    x[..., ::-1].cumsum(axis=-1, out=out[..., -2::-1])
     return out

@@ -80,7 +80,6 @@ def predict_ahead(
     belief: Belief,
     action_bin: int,
     config: ReviserConfig,
-    n_actions: int,
     k: int,
 ) -> FloatArray:
     """Eqs. 5-7: one step under the action, then ``horizon - 1`` steps of the marginal TPM.
@@ -92,11 +91,7 @@ def predict_ahead(
     pred = model.predict(belief, action_bin, config.transpose)
     extra = config.horizon - 1 if config.multi_step == "iterate" else min(config.horizon - 1, 1)
     for _ in range(extra):
-        start = top_k(np.maximum(pred, 0.0), k)
-        pred = sum(
-            (model.predict(start, r, config.transpose) for r in range(n_actions)),
-            np.zeros(model.n_states),
-        ) / n_actions
+        pred = model.predict_marginal(top_k(np.maximum(pred, 0.0), k), config.transpose)
     return pred
 
 

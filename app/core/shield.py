@@ -390,7 +390,7 @@ class Shield:
         q = cfg.action.n_bins
 
         def assess(action_bin: int) -> tuple[int, float, FloatArray]:
-            pred = reviser.predict_ahead(self.transitions, belief, action_bin, cfg.reviser, q,
+            pred = reviser.predict_ahead(self.transitions, belief, action_bin, cfg.reviser,
                                          cfg.limits.belief_top_k)
             threshold = reviser.variant_threshold(pred)
             verdict = reviser.inspect(pred, threshold, flagged, cfg.reviser.inspect)

@@ -30,6 +30,8 @@ FloatArray = npt.NDArray[np.float64]
 class TransitionModel(Protocol):
     """What the shield needs from a set of TPMs, one per action."""
 
+    n_actions: int
+
     @property
     def n_states(self) -> int:
         """Current matrix size n."""
@@ -47,6 +49,10 @@ class TransitionModel(Protocol):
         """Eq. 5: ``P^T belief`` (transpose, [REC]) or the literal ``P belief`` (A1)."""
         ...
 
+    def predict_marginal(self, belief: Belief, transpose: bool) -> FloatArray:
+        """Eq. 7's step: Eq. 5 under the marginal TPM ``P* = (1/q) sum_r P^r``."""
+        ...
+
     def reset_row(self, state: int) -> None:
         """Forget what was learned about leaving ``state`` (A16 ``reset``)."""
         ...
@@ -58,6 +64,15 @@ class TransitionModel(Protocol):
     def snapshot(self) -> dict[str, Any]:
         """Exact state as plain data and arrays."""
         ...
+
+
+def marginal_by_action(model: TransitionModel, belief: Belief, transpose: bool) -> FloatArray:
+    """Eq. 7's step as written: the mean of Eq. 5 over every action, summed in action order."""
+    q = model.n_actions
+    total: FloatArray = sum(
+        (model.predict(belief, r, transpose) for r in range(q)), np.zeros(model.n_states)
+    ) / q
+    return total
 
 
 # --- Literal Eqs. 3-4 ----------------------------------------------------------------------
@@ -170,6 +185,10 @@ class DenseTransitions:
         P = self.P[action_bin]
         pred: FloatArray = p @ P if transpose else P @ p
         return pred
+
+    def predict_marginal(self, belief: Belief, transpose: bool) -> FloatArray:
+        """Eq. 7's step."""
+        return marginal_by_action(self, belief, transpose)
 
     def reset_row(self, state: int) -> None:
         """A16 ``reset`` is only offered by the lazy backend, which knows each pad's age."""

@@ -42,8 +42,8 @@ def chain_model(n: int = 2) -> LazyTransitions:
 
 def test_a1_transpose_propagates_the_belief_along_rows() -> None:
     model = chain_model()
-    fixed = predict_ahead(model, one_hot(0), 0, ReviserConfig(transpose=True), 2, 8)
-    literal = predict_ahead(model, one_hot(0), 0, ReviserConfig(transpose=False), 2, 8)
+    fixed = predict_ahead(model, one_hot(0), 0, ReviserConfig(transpose=True), 8)
+    literal = predict_ahead(model, one_hot(0), 0, ReviserConfig(transpose=False), 8)
     assert fixed == pytest.approx([0.0, 1.0], abs=1e-5)  # from state 0 we go to state 1
     assert fixed.sum() == pytest.approx(1.0)
     assert literal.sum() != pytest.approx(1.0)  # P p: a column, not a distribution
@@ -262,7 +262,7 @@ def test_a11_single_product_ignores_the_horizon_beyond_two_steps() -> None:
     model.learn_one(one_hot(1), 1, one_hot(2))
     preds = {
         (mode, k): predict_ahead(model, one_hot(0), 0, ReviserConfig(multi_step=mode, horizon=k),
-                                 2, 8)
+                                 8)
         for mode in ("iterate", "single") for k in (2, 3)
     }
     np.testing.assert_array_equal(preds["iterate", 2], preds["single", 2])
