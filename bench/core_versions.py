@@ -15,6 +15,9 @@ from the first episode, seed 1000), recorded once by this checkout and replayed 
 model by each commit: the inputs a shield meets in the paper's experiment, where models keep a
 handful of states.
 
+``--shield JSON`` lays shield overrides over every workload's configuration (for example
+``'{"reviser": {"horizon": 2}}'``, the two-step prediction) to time a path the defaults skip.
+
 Each child also hashes every decision and the final snapshot of each workload: the table says
 whether the two commits decided identically, bit for bit.
 
@@ -43,7 +46,13 @@ STEPS = {"inspect": 300, "search": 60}
 TRAINING_SHIELD = {"reviser": {"activate_after_episodes": 0}}
 
 
-def record_training(episodes: int, path: Path) -> int:
+def with_overrides(config: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    """``config`` with the sections of ``overrides`` laid over its own."""
+    return {**config, **{section: {**config.get(section, {}), **fields}
+                         for section, fields in overrides.items()}}
+
+
+def record_training(episodes: int, path: Path, overrides: dict[str, Any]) -> int:
     """Every shield step of a shielded DDPG training of ``episodes`` episodes, as JSON."""
     sys.path.insert(0, str(ROOT))  # the client package, not bench/client.py beside this file
     import torch
@@ -58,7 +67,7 @@ def record_training(episodes: int, path: Path) -> int:
 
     torch.set_num_threads(1)
     calls: list[tuple[list[float], float | None, dict[str, Any]]] = []
-    local = LocalShield(ShieldConfig.from_dict(TRAINING_SHIELD))
+    local = LocalShield(ShieldConfig.from_dict(with_overrides(TRAINING_SHIELD, overrides)))
 
     class Recording:
         def revise(self, observation: Any, action: float | None, **options: Any) -> Any:
@@ -78,7 +87,7 @@ def record_training(episodes: int, path: Path) -> int:
     return len(calls)
 
 
-def child(round_index: int, training: str) -> None:
+def child(round_index: int, training: str, shield_json: str) -> None:
     """Time every workload once with the ``app`` first on sys.path; print JSON of the times
     and the digests."""
     from app.core import Shield, ShieldConfig
@@ -97,6 +106,7 @@ def child(round_index: int, training: str) -> None:
         h.update(codec.to_npz(shield.snapshot()))
         return h.hexdigest()[:16]
 
+    overrides = json.loads(shield_json)
     out: dict[str, float] = {}
     digests: dict[str, str] = {}
     for n in SIZES:
@@ -106,6 +116,7 @@ def child(round_index: int, training: str) -> None:
             if workload == "inspect":
                 snapshot["flags"]["flags"][:2] = [1, 2]
                 snapshot["config"]["reviser"]["activate_after_episodes"] = 0
+            snapshot["config"] = with_overrides(snapshot["config"], overrides)
             kind = "search" if workload == "search" else "inspect"
             warm = Shield.from_snapshot(snapshot)  # first calls pay for imports and caches
             for z, a in steps(20, 10_000 + round_index, kind):
@@ -117,7 +128,7 @@ def child(round_index: int, training: str) -> None:
             out[f"{n}/{workload}"] = (time.perf_counter() - start) / count * 1e6
             digests[f"{n}/{workload}"] = digest(shield, decisions)
     calls = json.loads(Path(training).read_text())
-    shield = Shield(ShieldConfig.from_dict(TRAINING_SHIELD))
+    shield = Shield(ShieldConfig.from_dict(with_overrides(TRAINING_SHIELD, overrides)))
     start = time.perf_counter()
     decisions = [shield.step(z, a, **options) for z, a, options in calls]
     out["training"] = (time.perf_counter() - start) / len(calls) * 1e6
@@ -128,9 +139,10 @@ def child(round_index: int, training: str) -> None:
     print(json.dumps({"us": out, "digests": digests, "training_states": shield.n_states}))
 
 
-def run_round(tree: Path, round_index: int, training: Path) -> dict[str, Any]:
+def run_round(tree: Path, round_index: int, training: Path, shield: str) -> dict[str, Any]:
     code = (f"import runpy, sys; sys.path.insert(0, {str(tree)!r}); "
-            f"runpy.run_path({__file__!r})['child']({round_index}, {str(training)!r})")
+            f"runpy.run_path({__file__!r})['child']({round_index}, {str(training)!r}, "
+            f"{shield!r})")
     result = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True,
                             text=True, cwd=tree)
     measured: dict[str, Any] = json.loads(result.stdout.strip().splitlines()[-1])
@@ -144,8 +156,11 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--episodes", type=int, default=40,
                         help="episodes of the recorded training")
+    parser.add_argument("--shield", default="{}",
+                        help="shield overrides (JSON) laid over every workload's configuration")
     parser.add_argument("--json", help="also write the results here")
     args = parser.parse_args()
+    overrides = json.loads(args.shield)
 
     revs = {name: subprocess.run(["git", "rev-parse", "--short", rev], cwd=ROOT, check=True,
                                  capture_output=True, text=True).stdout.strip()
@@ -156,14 +171,14 @@ def main() -> None:
             subprocess.run(["git", "worktree", "add", "--detach", str(trees[name]), rev],
                            cwd=ROOT, check=True, capture_output=True)
         training = Path(tmp) / "training.json"
-        recorded = record_training(args.episodes, training)
+        recorded = record_training(args.episodes, training, overrides)
         print(f"recorded {recorded} shield steps of {args.episodes} training episodes",
               flush=True)
         try:
             rounds: dict[str, list[dict[str, Any]]] = {name: [] for name in revs}
             for r in range(args.rounds):
                 for name in revs:
-                    rounds[name].append(run_round(trees[name], r, training))
+                    rounds[name].append(run_round(trees[name], r, training, args.shield))
                 print(f"round {r + 1}/{args.rounds} done", flush=True)
         finally:
             for tree in trees.values():
@@ -172,10 +187,12 @@ def main() -> None:
 
     keys = list(rounds["base"][0]["us"])
     result: dict[str, Any] = {"base": revs["base"], "head": revs["head"], "rounds": args.rounds,
-                              "training_steps": recorded, "python": platform.python_version(),
+                              "training_steps": recorded, "shield": overrides,
+                              "python": platform.python_version(),
                               "rows": []}
     print(f"\n{args.rounds} rounds, alternating; median of round means (us per step); "
-          f"{platform.machine()}, Python {platform.python_version()}\n")
+          f"{platform.machine()}, Python {platform.python_version()}; shield overrides "
+          f"{args.shield}\n")
     print(f"| states | workload | {revs['base']} (us) | {revs['head']} (us) | speed-up "
           "| identical decisions |")
     print("|---:|---|---:|---:|---:|---|")
