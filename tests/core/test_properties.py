@@ -9,10 +9,11 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from app.core import LimitsConfig, Shield, ShieldConfig, TransitionConfig
-from app.core.belief import recognise, top_k
+from app.core.belief import Belief, recognise, top_k
 from app.core.lazy_tpm import LazyTransitions
 from app.core.tpm import (
     DenseTransitions,
+    TransitionModel,
     grow_counts,
     marginal_by_action,
     probabilities,
@@ -52,6 +53,22 @@ ops = st.lists(
 )
 
 
+def play(op: object, *models: TransitionModel) -> tuple[int, Belief, Belief] | None:
+    """One of ``ops`` on every model: a new state, or a transition between two random
+    beliefs under an action (returned)."""
+    if op == "grow":
+        for model in models:
+            model.add_state()
+        return None
+    a, s1, s2 = op  # type: ignore[misc]
+    n = models[0].n_states
+    tau = top_k(np.random.default_rng(s1).random(n), 4)
+    gamma = top_k(np.random.default_rng(s2).random(n), 4)
+    for model in models:
+        model.learn_one(tau, a, gamma)
+    return a, tau, gamma
+
+
 @given(ops, st.sampled_from(["prior", "zero_uniform", "zero_identity"]),
        st.floats(0.001, 0.5))
 def test_tpm_rows_stay_distributions_and_forms_agree(ops_list: list, mode: str,
@@ -60,18 +77,13 @@ def test_tpm_rows_stay_distributions_and_forms_agree(ops_list: list, mode: str,
     lazy, dense = LazyTransitions(3, cfg, 100), DenseTransitions(3, cfg)
     F, F_o = [np.zeros((0, 0))] * 3, [np.zeros(0)] * 3
     for op in ["grow", *ops_list]:
-        if op == "grow":
-            lazy.add_state()
-            dense.add_state()
+        learned = play(op, lazy, dense)
+        if learned is None:
             F = [grow_counts(f, fo, cfg.prior)[0] for f, fo in zip(F, F_o, strict=True)]
             F_o = [f.sum(axis=1) for f in F]
             continue
-        a, s1, s2 = op
+        a, tau, gamma = learned
         n = lazy.n_states
-        tau = top_k(np.random.default_rng(s1).random(n), 4)
-        gamma = top_k(np.random.default_rng(s2).random(n), 4)
-        lazy.learn_one(tau, a, gamma)
-        dense.learn_one(tau, a, gamma)
         F[a], F_o[a] = update_counts(F[a], F_o[a], tau.dense(n), gamma.dense(n), lr)
     for a in range(3):
         P = lazy.matrix(a)
@@ -89,13 +101,7 @@ def test_lazy_scales_kept_per_row_equal_a_fresh_computation(
     cfg = TransitionConfig(expansion=mode, on_replace="reset")  # type: ignore[arg-type]
     lazy = LazyTransitions(3, cfg, 100)
     for op in ["grow", *ops_list]:
-        if op == "grow":
-            lazy.add_state()
-            continue
-        a, s1, s2 = op
-        n = lazy.n_states
-        lazy.learn_one(top_k(np.random.default_rng(s1).random(n), 4), a,
-                       top_k(np.random.default_rng(s2).random(n), 4))
+        play(op, lazy)
     for state in resets:
         lazy.reset_row(state % lazy.n_states)
     fresh = LazyTransitions.restore(3, cfg, 100, lazy.snapshot())
@@ -117,16 +123,7 @@ def test_the_marginal_step_of_every_action_at_once_is_their_mean_bit_for_bit(
     cfg = TransitionConfig(expansion=mode)  # type: ignore[arg-type]
     lazy, dense = LazyTransitions(3, cfg, 100), DenseTransitions(3, cfg)
     for op in ["grow", *ops_list]:
-        if op == "grow":
-            lazy.add_state()
-            dense.add_state()
-            continue
-        a, s1, s2 = op
-        n = lazy.n_states
-        prev = top_k(np.random.default_rng(s1).random(n), 4)
-        belief = top_k(np.random.default_rng(s2).random(n), 4)
-        lazy.learn_one(prev, a, belief)
-        dense.learn_one(prev, a, belief)
+        play(op, lazy, dense)
     belief = top_k(np.random.default_rng(seed).random(lazy.n_states), k)
     for transpose in (True, False):
         marginal = lazy.predict_marginal(belief, transpose)
