@@ -14,6 +14,7 @@ from app.core.tpm import (
     DenseTransitions,
     grow_counts,
     grow_stable,
+    marginal_by_action,
     probabilities,
     update_counts,
     update_stable,
@@ -181,3 +182,22 @@ def test_a_belief_state_of_negligible_probability_learns_quietly() -> None:
         P = lazy.matrix(0)
     np.testing.assert_allclose(P.sum(axis=1), 1.0)
     np.testing.assert_allclose(P[1], [0.5, 0.5], rtol=1e-12)  # still the padding alone
+
+
+def test_the_marginal_step_matches_the_loop_bit_for_bit_at_the_experiments_size() -> None:
+    """21 actions and 16-state beliefs, as in the car-following experiment: enough terms for
+    a change of summation order to show in the last bits (the property test runs 3 actions)."""
+    rng = np.random.default_rng(11)
+    lazy = LazyTransitions(21, TransitionConfig(), 100)
+    prev = None
+    for _ in range(3000):
+        if lazy.n_states == 0 or lazy.n_states < 30 and rng.random() < 0.02:
+            lazy.add_state()
+        belief = top_k(rng.random(lazy.n_states) ** 4, 16)
+        if prev is not None and prev.index.max() < lazy.n_states:
+            lazy.learn_one(prev, int(rng.integers(21)), belief)
+        prev = belief
+    for _ in range(200):
+        belief = top_k(rng.random(lazy.n_states) ** 4, 16)
+        np.testing.assert_array_equal(lazy.predict_marginal(belief, True),
+                                      marginal_by_action(lazy, belief, True))
