@@ -33,8 +33,11 @@ class Belief:
         """How many of the n states lie before the first belief state, between each pair of
         them (the upper one included) and after the last: the runs of columns j that share
         the same belief states i < j."""
-        edges = np.concatenate(([0], self.index + 1, [n_states]))
-        return edges[1:] - edges[:-1]
+        edges = np.empty(self.index.size + 2, dtype=np.int64)
+        edges[0], edges[-1] = 0, n_states
+        np.add(self.index, 1, out=edges[1:-1])
+        out: IndexArray = edges[1:] - edges[:-1]
+        return out
 
     def dense(self, n_states: int) -> FloatArray:
         """The belief as a length-n vector."""

@@ -133,7 +133,11 @@ class LazyTransitions:
         learned = row_sum[rows] * factor + lr * tau * gamma.sum()
         row_sum[rows] = learned
         contrib = lr * tau[:, None] * gamma[None, :]
-        self._refresh_scales((a, rows), base, learned)
+        # _refresh_scales for these rows, through the action's own rows: indexing with
+        # [a][rows] costs a fraction of [a, rows]
+        log_norm = _log_norm(self._log_pad[a][rows], base, learned)
+        self._learned_scale[a][rows] = np.exp(base - log_norm)
+        self._pad_scale[a][rows] = np.exp(self._log_level[a][rows] - log_norm)
 
         nnz = nnz_a[rows]
         width = self._vals[a].shape[1]
@@ -188,22 +192,22 @@ class LazyTransitions:
 
     def _predict_transposed(self, belief: Belief, a: int) -> FloatArray:
         n, rows, p = self._n, belief.index, belief.prob
-        learned = p * self._learned_scale[a, rows]
+        learned = p * self._learned_scale[a][rows]
         vals = self._vals[a][rows] * learned[:, None]
         if vals.size:  # weighted bincount is float64 already: asarray does not copy
             cols = self._cols[a][rows].ravel()
             pred = np.asarray(np.bincount(cols, weights=vals.ravel(), minlength=n), np.float64)
         else:
             pred = np.zeros(n)
-        c = p * self._pad_scale[a, rows]
+        c = p * self._pad_scale[a][rows]
         mode = self.config.expansion
         if mode == "prior":
             # sum_i c_i pad(max(i, j)) = pad(j) sum_{i<j} c_i + sum_{i>=j} c_i pad(i)
             below = np.zeros(rows.size + 1)
             c.cumsum(out=below[1:])
-            weighted = _suffix_sums(c * self._pad[a, rows])
+            weighted = _suffix_sums(c * self._pad[a][rows])
             segment = belief.segments(n)
-            pred += self._pad[a, :n] * below.repeat(segment) + weighted.repeat(segment)
+            pred += self._pad[a][:n] * below.repeat(segment) + weighted.repeat(segment)
         elif mode == "zero_uniform":  # row i spreads over columns j <= i
             pred += _suffix_sums(c).repeat(belief.segments(n))
         else:
