@@ -1,9 +1,11 @@
 """The e-FSM step of two commits side by side: did a change make the core faster?
 
-Each commit is checked out into a temporary git worktree; a child process per commit and round
-imports that commit's ``app`` and runs the same workloads on the same models (built by this
-checkout's ``bench/core_step.py``, so both commits see identical inputs). Rounds alternate
-between the commits so that drift of the machine falls on both. Workloads per size n:
+Each commit is checked out into a temporary git worktree; a child process per commit imports
+that commit's ``app`` and runs the same workloads on the same models (built by this checkout's
+``bench/core_step.py``, so both commits see identical inputs). Both children stay alive and
+take turns, workload by workload, so that each pair of measurements is a few seconds apart and
+a drift of the machine's speed (large on shared virtual machines) falls on both; the speed-up
+is the median of the pairs' ratios. Workloads per size n:
 
 * ``inspect``: two states flagged, the reviser active: learn, then predict and inspect the
   proposed action (the service benchmark's step);
@@ -87,9 +89,10 @@ def record_training(episodes: int, path: Path, overrides: dict[str, Any]) -> int
     return len(calls)
 
 
-def child(round_index: int, training: str, shield_json: str) -> None:
-    """Time every workload once with the ``app`` first on sys.path; print JSON of the times
-    and the digests."""
+def child(training: str, shield_json: str) -> None:
+    """Time workloads on request, with the ``app`` first on sys.path: each line
+    ``ROUND KEY`` of stdin runs workload KEY once on that round's steps, and each answer is one
+    JSON line of stdout with the time per step and the digest of the decisions."""
     from app.core import Shield, ShieldConfig
     from app.service import codec
 
@@ -97,7 +100,10 @@ def child(round_index: int, training: str, shield_json: str) -> None:
     assert spec is not None and spec.loader is not None
     core_step = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(core_step)
-    build, steps, variant = core_step.build, core_step.steps, core_step.variant
+    steps, variant = core_step.steps, core_step.variant
+    import app
+
+    assert Path(app.__file__).parent.parent == Path.cwd(), "the commit's app was not imported"
 
     def digest(shield: Shield, decisions: list[Any]) -> str:
         h = hashlib.sha256()
@@ -107,46 +113,64 @@ def child(round_index: int, training: str, shield_json: str) -> None:
         return h.hexdigest()[:16]
 
     overrides = json.loads(shield_json)
-    out: dict[str, float] = {}
-    digests: dict[str, str] = {}
-    for n in SIZES:
-        data = build(n)
-        for workload, count in STEPS.items():
-            snapshot = variant(data, "search") if workload == "search" else copy.deepcopy(data)
-            if workload == "inspect":
-                snapshot["flags"]["flags"][:2] = [1, 2]
-                snapshot["config"]["reviser"]["activate_after_episodes"] = 0
-            snapshot["config"] = with_overrides(snapshot["config"], overrides)
-            kind = "search" if workload == "search" else "inspect"
-            warm = Shield.from_snapshot(snapshot)  # first calls pay for imports and caches
-            for z, a in steps(20, 10_000 + round_index, kind):
+    calls = json.loads(Path(training).read_text())
+    built: dict[int, dict[str, Any]] = {}
+
+    def snapshot(n: int, workload: str) -> dict[str, Any]:
+        if n not in built:
+            built[n] = core_step.build(n)
+        data = variant(built[n], "search") if workload == "search" else copy.deepcopy(built[n])
+        if workload == "inspect":
+            data["flags"]["flags"][:2] = [1, 2]
+            data["config"]["reviser"]["activate_after_episodes"] = 0
+        data["config"] = with_overrides(data["config"], overrides)
+        return data
+
+    for line in sys.stdin:
+        round_index, key = line.split()
+        if key == "training":
+            shield = Shield(ShieldConfig.from_dict(with_overrides(TRAINING_SHIELD, overrides)))
+            start = time.perf_counter()
+            decisions = [shield.step(z, a, **options) for z, a, options in calls]
+            us = (time.perf_counter() - start) / len(calls) * 1e6
+        else:
+            size, workload = key.split("/")
+            data = snapshot(int(size), workload)
+            warm = Shield.from_snapshot(data)  # first calls pay for imports and caches
+            for z, a in steps(20, 10_000 + int(round_index), workload):
                 warm.step(z, a)
-            shield = Shield.from_snapshot(snapshot)
-            block = steps(count, round_index, kind)
+            shield = Shield.from_snapshot(data)
+            block = steps(STEPS[workload], int(round_index), workload)
             start = time.perf_counter()
             decisions = [shield.step(z, a) for z, a in block]
-            out[f"{n}/{workload}"] = (time.perf_counter() - start) / count * 1e6
-            digests[f"{n}/{workload}"] = digest(shield, decisions)
-    calls = json.loads(Path(training).read_text())
-    shield = Shield(ShieldConfig.from_dict(with_overrides(TRAINING_SHIELD, overrides)))
-    start = time.perf_counter()
-    decisions = [shield.step(z, a, **options) for z, a, options in calls]
-    out["training"] = (time.perf_counter() - start) / len(calls) * 1e6
-    digests["training"] = digest(shield, decisions)
-    import app
-
-    assert Path(app.__file__).parent.parent == Path.cwd(), "the commit's app was not imported"
-    print(json.dumps({"us": out, "digests": digests, "training_states": shield.n_states}))
+            us = (time.perf_counter() - start) / len(block) * 1e6
+        print(json.dumps({"us": us, "digest": digest(shield, decisions),
+                          "states": shield.n_states}), flush=True)
 
 
-def run_round(tree: Path, round_index: int, training: Path, shield: str) -> dict[str, Any]:
-    code = (f"import runpy, sys; sys.path.insert(0, {str(tree)!r}); "
-            f"runpy.run_path({__file__!r})['child']({round_index}, {str(training)!r}, "
-            f"{shield!r})")
-    result = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True,
-                            text=True, cwd=tree)
-    measured: dict[str, Any] = json.loads(result.stdout.strip().splitlines()[-1])
-    return measured
+class Worker:
+    """One commit's child process, kept alive between requests."""
+
+    def __init__(self, tree: Path, training: Path, shield: str) -> None:
+        code = (f"import runpy, sys; sys.path.insert(0, {str(tree)!r}); "
+                f"runpy.run_path({__file__!r})['child']({str(training)!r}, {shield!r})")
+        self.process = subprocess.Popen([sys.executable, "-c", code], cwd=tree, text=True,
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+
+    def time(self, round_index: int, key: str) -> dict[str, Any]:
+        assert self.process.stdin is not None and self.process.stdout is not None
+        self.process.stdin.write(f"{round_index} {key}\n")
+        self.process.stdin.flush()
+        answer = self.process.stdout.readline()
+        if not answer:
+            raise RuntimeError(f"the worker for {key} stopped (exit {self.process.wait()})")
+        measured: dict[str, Any] = json.loads(answer)
+        return measured
+
+    def close(self) -> None:
+        if self.process.stdin is not None:
+            self.process.stdin.close()
+        self.process.wait(60)
 
 
 def main() -> None:
@@ -174,40 +198,47 @@ def main() -> None:
         recorded = record_training(args.episodes, training, overrides)
         print(f"recorded {recorded} shield steps of {args.episodes} training episodes",
               flush=True)
+        keys = [f"{n}/{w}" for n in SIZES for w in STEPS] + ["training"]
+        workers = {name: Worker(trees[name], training, args.shield) for name in revs}
         try:
-            rounds: dict[str, list[dict[str, Any]]] = {name: [] for name in revs}
+            rounds: dict[str, dict[str, list[dict[str, Any]]]] = {
+                name: {key: [] for key in keys} for name in revs}
             for r in range(args.rounds):
-                for name in revs:
-                    rounds[name].append(run_round(trees[name], r, training, args.shield))
+                for key in keys:  # the two take turns, first one then the other
+                    for name in list(revs)[:: 1 if r % 2 == 0 else -1]:
+                        rounds[name][key].append(workers[name].time(r, key))
                 print(f"round {r + 1}/{args.rounds} done", flush=True)
         finally:
+            for worker in workers.values():
+                worker.close()
             for tree in trees.values():
                 subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT,
                                check=False, capture_output=True)
 
-    keys = list(rounds["base"][0]["us"])
     result: dict[str, Any] = {"base": revs["base"], "head": revs["head"], "rounds": args.rounds,
                               "training_steps": recorded, "shield": overrides,
                               "python": platform.python_version(),
                               "rows": []}
-    print(f"\n{args.rounds} rounds, alternating; median of round means (us per step); "
-          f"{platform.machine()}, Python {platform.python_version()}; shield overrides "
-          f"{args.shield}\n")
+    print(f"\n{args.rounds} rounds, the two commits taking turns workload by workload; "
+          f"medians of the rounds (us per step) and of the paired ratios; {platform.machine()}, "
+          f"Python {platform.python_version()}; shield overrides {args.shield}\n")
     print(f"| states | workload | {revs['base']} (us) | {revs['head']} (us) | speed-up "
           "| identical decisions |")
     print("|---:|---|---:|---:|---:|---|")
     for key in keys:
-        base = statistics.median(r["us"][key] for r in rounds["base"])
-        head = statistics.median(r["us"][key] for r in rounds["head"])
+        base, head = rounds["base"][key], rounds["head"][key]
         # rounds draw their own steps: compare the two commits round by round
-        identical = all(b["digests"][key] == h["digests"][key]
-                        for b, h in zip(rounds["base"], rounds["head"], strict=True))
+        identical = all(b["digest"] == h["digest"] for b, h in zip(base, head, strict=True))
+        speed_up = statistics.median(b["us"] / h["us"] for b, h in zip(base, head, strict=True))
         n, workload = key.split("/") if "/" in key else (
-            str(rounds["base"][0]["training_states"]), key)  # training: the states it ends with
-        result["rows"].append({"states": int(n), "workload": workload, "base_us": base,
-                               "head_us": head, "identical": identical})
-        print(f"| {n} | {workload} | {base:.0f} | {head:.0f} | {base / head:.2f}x "
-              f"| {'yes' if identical else 'NO'} |")
+            str(base[0]["states"]), key)  # training: the states it ends with
+        row = {"states": int(n), "workload": workload,
+               "base_us": statistics.median(b["us"] for b in base),
+               "head_us": statistics.median(h["us"] for h in head),
+               "speed_up": speed_up, "identical": identical}
+        result["rows"].append(row)
+        print(f"| {n} | {workload} | {row['base_us']:.0f} | {row['head_us']:.0f} "
+              f"| {speed_up:.2f}x | {'yes' if identical else 'NO'} |")
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=2))
 
