@@ -7,10 +7,10 @@
 #   2. bench/learner.py: a training step of 1, 5 and 10 learners, separate, batched on the
 #      CPU and batched as a CUDA graph; bench/rounding_drift.py: how far the CUDA ensemble
 #      drifts from separate runs;
-#   3. the paper's protocol (results/paper-protocol.sh) in each arrangement named in LAYOUTS,
-#      from episode 1 for SECONDS_EACH seconds each (default 180), then stopped: how fast
-#      each arrangement trains on this machine, from the records (steps and wall_s of every
-#      episode).
+#   3. bench/layouts.sh: the paper's protocol (results/paper-protocol.sh) in each
+#      arrangement named in LAYOUTS, from episode 1 for SECONDS_EACH seconds each (default
+#      180), then stopped: how fast each arrangement trains on this machine, from the records
+#      (steps and wall_s of every episode).
 #
 #   bench/device.sh OUT           (OUT: a new folder; PYTHON defaults to python3)
 #
@@ -18,13 +18,13 @@
 # bench/device_wheels.sh fetches them here as wheels, and its header says how the call
 # installs them. bench/device_pace.py turns the layouts' archives into a table.
 #
-# A layout is "NAME:VARIABLES" with the variables of results/paper-protocol.sh, for example
+# A layout is "NAME:VARIABLES" (bench/layouts.sh), for example
 # "gpu-ws:LOCKSTEP=1 DEVICE=cuda GROUP=10 TRANSPORT=ws". What it writes under OUT: machine.txt,
 # tests.log, learner.json, learner.md, rounding-drift.md, and per layout NAME.tar.gz (its
 # records, its services' logs and the protocol's output, protocol.log): at most 8 files come
 # back from the machine, so at most 3 layouts.
 set -uo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/.." || exit 1
 out=$(realpath -m "$1")
 python=${PYTHON:-python3}
 seconds=${SECONDS_EACH:-180}
@@ -49,16 +49,4 @@ cat "$out/machine.txt"
     tee "$out/learner.md"
 "$python" bench/rounding_drift.py 2>&1 | tee "$out/rounding-drift.md"
 
-IFS=';' read -ra chosen <<<"$layouts"
-for layout in "${chosen[@]}"; do
-    name=${layout%%:*}
-    work=$(mktemp -d)
-    echo "== $name: ${layout#*:} for $seconds s"
-    # shellcheck disable=SC2086  # the layout's variables are words
-    env ${layout#*:} PYTHON="$python" timeout "$seconds" results/paper-protocol.sh \
-        "$work/$name" >"$work/protocol.log" 2>&1
-    echo "stopped after $seconds s (status $?)" >>"$work/protocol.log"
-    mv "$work/protocol.log" "$work/$name/"
-    tar -czf "$out/$name.tar.gz" -C "$work" "$name"
-    tail -3 "$work/$name/protocol.log"
-done
+SECONDS_EACH=$seconds LAYOUTS=$layouts PYTHON=$python bench/layouts.sh "$out"
