@@ -47,8 +47,9 @@ def free_port() -> int:
         return port
 
 
-def start(port: int) -> subprocess.Popen[bytes]:
-    command = [sys.executable, str(Path(__file__).with_name("service_app.py")), str(port)]
+def start(port: int, *options: str) -> subprocess.Popen[bytes]:
+    command = [sys.executable, str(Path(__file__).with_name("service_app.py")), str(port),
+               *options]
     if shutil.which("taskset"):
         command = ["taskset", "-c", "0", *command]
     process = subprocess.Popen(command)
@@ -152,13 +153,13 @@ def main() -> None:
     print("| states | route | p50 (us) | p99 (us) | per second | vs floor (p50) |")
     print("|---:|---|---:|---:|---:|---:|")
     for name, r in results.items():
-        n = name[1:]
+        states = name[1:]
         rows = [("no-op route (floor)", "noop", None), ("POST /revise", "revise", "noop"),
                 ("WebSocket echo (floor)", "echo", None), ("WebSocket step", "ws", "echo"),
                 ("batch route, per step", "batch", None)]
         for label, key, floor in rows:
             ratio = f"{r[key]['p50_us'] / r[floor]['p50_us']:.2f}x" if floor else ""
-            print(f"| {n} | {label} | {r[key]['p50_us']:.0f} | {r[key]['p99_us']:.0f} "
+            print(f"| {states} | {label} | {r[key]['p50_us']:.0f} | {r[key]['p99_us']:.0f} "
                   f"| {r[key]['per_s']:.0f} | {ratio} |")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))

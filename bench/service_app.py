@@ -1,22 +1,38 @@
 """The shield app plus two floors for ``bench/service.py``: a no-op route and a WebSocket echo.
 
-    python bench/service_app.py PORT
+``--timing`` also times every call of ``ModelRegistry.step_many`` (the model's share of a
+request: validation, journal, the e-FSM step) and serves the times at ``GET /bench/timing``,
+which hands them over and starts afresh (for ``bench/service_split.py``).
+
+    python bench/service_app.py PORT [--timing]
 """
 
 from __future__ import annotations
 
 import sys
+import time
+from typing import Any
 
 import uvicorn
-from fastapi import WebSocket, WebSocketDisconnect
+from fastapi import FastAPI, WebSocket, WebSocketDisconnect
 
 from app.api.schemas import ReviseRequest
 from app.main import create_app
+from app.service.registry import ModelRegistry
 from app.settings import Settings
 
 
-def build() -> object:
+def build(timing: bool = False) -> FastAPI:
     api = create_app(Settings())
+    if timing:
+        times = time_model_steps()
+
+        @api.get("/bench/timing")
+        def timing_route() -> list[float]:
+            """Seconds of every model step since the last call."""
+            out = list(times)
+            times.clear()
+            return out
 
     @api.post("/bench/noop")
     async def noop(body: ReviseRequest) -> dict[str, bool]:
@@ -35,6 +51,22 @@ def build() -> object:
     return api
 
 
+def time_model_steps() -> list[float]:
+    """Wrap ``ModelRegistry.step_many`` so that each call appends its seconds to the list."""
+    times: list[float] = []
+    step_many = ModelRegistry.step_many
+
+    def timed(self: ModelRegistry, *args: Any, **kwargs: Any) -> Any:
+        start = time.perf_counter()
+        try:
+            return step_many(self, *args, **kwargs)
+        finally:
+            times.append(time.perf_counter() - start)
+
+    ModelRegistry.step_many = timed  # type: ignore[method-assign]
+    return times
+
+
 if __name__ == "__main__":
-    uvicorn.run(build(), host="127.0.0.1", port=int(sys.argv[1]), log_level="warning",
-                access_log=False)
+    uvicorn.run(build("--timing" in sys.argv), host="127.0.0.1", port=int(sys.argv[1]),
+                log_level="warning", access_log=False)
