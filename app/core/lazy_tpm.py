@@ -111,9 +111,8 @@ class LazyTransitions:
     def _refresh_scales(self, at: Any, offset: Any, row_sum: FloatArray) -> None:
         """Row i of P^a is ``learned_scale(i) * vals(i) + pad_scale(i) * padding(i)``, for the
         rows ``at`` whose offsets and learned sums are given."""
-        log_norm = _log_norm(self._log_pad[at], offset, row_sum)
-        self._learned_scale[at] = np.exp(offset - log_norm)
-        self._pad_scale[at] = np.exp(self._log_level[at] - log_norm)
+        self._learned_scale[at], self._pad_scale[at] = _scales(
+            self._log_pad[at], self._log_level[at], offset, row_sum)
 
     def learn_one(self, prev: Belief, action_bin: int, belief: Belief) -> None:
         """Eqs. 3-4 with tau = prev, gamma = belief, for the matrix of ``action_bin``.
@@ -135,9 +134,8 @@ class LazyTransitions:
         contrib = lr * tau[:, None] * gamma[None, :]
         # _refresh_scales for these rows, through the action's own rows: indexing with
         # [a][rows] costs a fraction of [a, rows]
-        log_norm = _log_norm(self._log_pad[a][rows], base, learned)
-        self._learned_scale[a][rows] = np.exp(base - log_norm)
-        self._pad_scale[a][rows] = np.exp(self._log_level[a][rows] - log_norm)
+        self._learned_scale[a][rows], self._pad_scale[a][rows] = _scales(
+            self._log_pad[a][rows], self._log_level[a][rows], base, learned)
 
         nnz = nnz_a[rows]
         width = self._vals[a].shape[1]
@@ -383,6 +381,13 @@ def _log_norm(log_pad: FloatArray, offset: Any, row_sum: FloatArray) -> FloatArr
     with np.errstate(divide="ignore"):
         log_norm: FloatArray = np.logaddexp(log_pad, offset + np.log(row_sum))
     return log_norm
+
+
+def _scales(log_pad: FloatArray, log_level: FloatArray, offset: Any,
+            row_sum: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The learned and padding scales of rows (see :meth:`LazyTransitions._refresh_scales`)."""
+    log_norm = _log_norm(log_pad, offset, row_sum)
+    return np.exp(offset - log_norm), np.exp(log_level - log_norm)
 
 
 def _suffix_sums(x: FloatArray) -> FloatArray:
