@@ -42,7 +42,8 @@
 # learning with the other's wait for answers, but in two minutes of each here the shielded
 # runs stepped no faster (about 9.5 ms a step) and DDPG alone beside them 1.5 times slower;
 # the cores are busy either way, and a batched update of 5 learners costs more than half of
-# one of 10.
+# one of 10. The shielded arm alone, too, stepped as fast in one group with one service as in
+# two groups of 5 or with SERVICES=2 (bench/layouts.sh, BENCHMARKS.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-results/paper-protocol-knee}
