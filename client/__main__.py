@@ -163,10 +163,13 @@ def compare_command(
     blocks: Annotated[bool, typer.Option(
         help="Also a table per block of 100 episodes, the rows side by side in each cell.")]
     = False,
+    partings: Annotated[bool, typer.Option(
+        help="Also where each run parts from the same run of the first experiment.")]
+    = False,
 ) -> None:
     """One table over the experiments in DIRECTORIES (ablations): a row per directory and arm."""
     try:
-        text = report.compare(directories, episodes, blocks)
+        text = report.compare(directories, episodes, blocks, partings)
     except RecordError as error:
         fail(str(error))
     if out is not None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import os
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -247,23 +247,73 @@ def side_by_side(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def compare(directories: list[Path], limit: int | None = None, blocks: bool = False) -> str:
+def parting(first: list[EpisodeRecord], other: list[EpisodeRecord]) -> dict[tuple[str, int], str]:
+    """Per run of ``first`` (arm, run), where the same run in ``other`` goes another way: the
+    first episode whose record differs in anything but its wall time, "none in N" where the
+    two agree on all N episodes both hold, "other seed" where the two were seeded apart (not
+    the same run), "-" where ``other`` lacks the run. Paired ablations share their seeds, so
+    a switch shows first where its run parts."""
+    def runs(episodes: list[EpisodeRecord]) -> dict[tuple[str, int], list[EpisodeRecord]]:
+        grouped: dict[tuple[str, int], list[EpisodeRecord]] = defaultdict(list)
+        for r in sorted(episodes, key=lambda r: (r.arm, r.run, r.episode)):
+            grouped[(r.arm, r.run)].append(replace(r, wall_s=0.0))
+        return grouped
+
+    theirs = runs(other)
+    where: dict[tuple[str, int], str] = {}
+    for key, mine in runs(first).items():
+        paired = theirs.get(key)
+        if not paired:
+            where[key] = "-"
+        elif paired[0].seed != mine[0].seed:
+            where[key] = "other seed"
+        else:
+            both = zip(mine, paired, strict=False)  # as far as the shorter run went
+            differ = next((a.episode for a, b in both if a != b), None)
+            where[key] = f"none in {min(len(mine), len(paired))}" if differ is None \
+                else str(differ)
+    return where
+
+
+def partings_table(names: list[str], episodes: list[list[EpisodeRecord]]) -> str:
+    """Where each run of the later experiments parts from the same run of the first."""
+    columns = [parting(episodes[0], other) for other in episodes[1:]]
+    lines = [f"Where each run parts from the same run of {names[0]} (the first episode that "
+             "went differently):", "",
+             f"| arm | run | {' | '.join(names[1:])} |", "|---|---:|" + "---:|" * len(columns)]
+    for arm, run in columns[0]:
+        lines.append(f"| {arm} | {run} | {' | '.join(c[(arm, run)] for c in columns)} |")
+    return "\n".join(lines)
+
+
+def compare(directories: list[Path], limit: int | None = None, blocks: bool = False,
+            partings: bool = False) -> str:
     """One table over several experiments (ablations): a row per directory and arm, with the
     shield configuration each was run with; of each run's first ``limit`` episodes, if
-    given; with ``blocks``, also the rows per block of 100 episodes side by side."""
+    given; with ``blocks``, also the rows per block of 100 episodes side by side; with
+    ``partings``, where each run of the later experiments parts from the first's."""
     summary: dict[str, Any] = {}
     notes: dict[str, str] = {}
-    for directory, name in zip(directories, labels(directories), strict=True):
+    names = labels(directories)
+    every: list[list[EpisodeRecord]] = []
+    for directory, name in zip(directories, names, strict=True):
         headers, episodes = read_all(directory)
         if limit is not None:
             episodes = first_episodes(episodes, limit)
+        every.append(episodes)
         overrides = json.dumps(headers[0]["config"]["shield_config"], separators=(",", ":"))
         for arm, row in summarise(episodes).items():
             label = f"{name}: {arm}"
             summary[label] = row
             notes[label] = f"`{overrides}`" if "+" in arm else "-"
-    text = table(summary, notes)
-    return f"{text}\n\n{side_by_side(summary)}" if blocks else text
+    parts = [table(summary, notes)]
+    if blocks:
+        parts.append(side_by_side(summary))
+    if partings:
+        if len(directories) < 2:
+            raise RecordError("where runs part needs two experiments or more")
+        parts.append(partings_table(names, every))
+    return "\n\n".join(parts)
 
 
 def figure(episodes: list[EpisodeRecord], path: Path) -> None:

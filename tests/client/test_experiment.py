@@ -153,6 +153,25 @@ def test_blocks_side_by_side_align_by_episode() -> None:
                                     "| 101-110 | - / 100.0% | - / 0 | - / 0 | - / 1.0 |"]
 
 
+def test_partings_name_the_first_episode_that_went_differently() -> None:
+    base = [record(0, e, "success") for e in range(1, 6)] + \
+        [record(1, e, "success") for e in range(1, 4)]
+    crashed = [record(0, e, "collision" if e == 4 else "success") for e in range(1, 6)] + \
+        [record(1, e, "success") for e in range(1, 3)]
+    assert report.parting(base, crashed) == {("a", 0): "4", ("a", 1): "none in 2"}
+    slower = [dataclasses.replace(r, wall_s=9.0) for r in base]
+    assert set(report.parting(base, slower).values()) == {"none in 5", "none in 3"}
+    drifted = [dataclasses.replace(r, speed_diff_mean=1.0 + 1e-12) if r.episode == 3 else r
+               for r in base]
+    assert report.parting(base, drifted) == {("a", 0): "3", ("a", 1): "3"}
+    reseeded = [dataclasses.replace(r, seed=7) for r in base]
+    assert report.parting(base, reseeded)[("a", 0)] == "other seed"
+    assert report.parting(base, crashed[:5])[("a", 1)] == "-"
+    text = report.partings_table(["base", "crashed", "drifted"], [base, crashed, drifted])
+    assert text.splitlines()[2:] == ["| arm | run | crashed | drifted |", "|---|---:|---:|---:|",
+                                     "| a | 0 | 4 | 3 |", "| a | 1 | none in 2 | 3 |"]
+
+
 def test_report_writes_summary_table_and_figure(tmp_path: Path) -> None:
     runner.run_one(CONFIG, "idm-aggressive", 0, tmp_path)
     text, summary = report.write(tmp_path)
@@ -425,6 +444,12 @@ def test_compare_puts_experiments_side_by_side(tmp_path: Path) -> None:
     assert row.count(" / ") == 4 * 3  # four rows in each of four columns; one span of episodes
     too_many = cli("compare", str(tmp_path / "default"), "--episodes", "3")
     assert too_many.returncode == 2 and "--episodes must be at most 2" in too_many.stderr
+    parted = cli("compare", str(tmp_path / "default"), str(tmp_path / "overwrite"), "--partings")
+    assert parted.returncode == 0, parted.stderr
+    rows = parted.stdout.split("Where each run parts")[1].splitlines()
+    assert "| idm-aggressive | 0 | none in 2 |" in rows  # the shield does not touch this arm
+    alone = cli("compare", str(tmp_path / "default"), "--partings")
+    assert alone.returncode == 2 and "two experiments" in alone.stderr
 
 
 def test_two_processes_never_write_one_run(tmp_path: Path) -> None:
