@@ -107,7 +107,8 @@ def lockstep_against_separate(runs: int, episodes: int, url: str = "local",
     """Seconds for ``runs`` x ``episodes`` of ddpg+shield, one run after another and in
     lockstep; with a service ``url``, separate runs use WebSocket and lockstep the batch
     route (one request per step for every run)."""
-    from client.experiment.runner import ExperimentConfig, run_lockstep, run_one
+    from client.experiment.lockstep import run_lockstep
+    from client.experiment.runner import ExperimentConfig, run_one
 
     config = ExperimentConfig(arms=("ddpg+shield",), runs=runs, episodes=episodes, seed=0,
                               ddpg={"warmup": 256}, shield=url, transport="ws",

@@ -20,7 +20,7 @@ import typer
 from tqdm import tqdm
 
 from app.core import ShieldConfig, ShieldError
-from client.experiment import checkpoint, report, runner
+from client.experiment import checkpoint, parallel, report, runner
 from client.experiment.records import RecordError, read_all
 from client.experiment.trace import analyse as analyse_traces
 from client.shield import ShieldAPIError, ShieldClient, ShieldUnavailable
@@ -55,9 +55,9 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
                     probe.health()
         total = len(config.arms) * runs * episodes
         with tqdm(total=total, desc="episodes", unit="ep", disable=None) as bar:
-            runner.run_all(config, out, workers, token, bar, lockstep, trace, device,
+            parallel.run_all(config, out, workers, token, bar, lockstep, trace, device,
                            checkpoint_every, deadline)
-        if deadline is not None and runner.past(deadline):
+        if deadline is not None and parallel.past(deadline):
             started = any((out / "records").glob("*.jsonl*"))
             done = sum(r.arm in config.arms for r in read_all(out)[1]) if started else 0
             if done < total:
@@ -200,7 +200,7 @@ def service(data_dir: Path) -> Iterator[str]:
     process = subprocess.Popen(  # ends with this process, even one killed outright
         [sys.executable, "-m", "app", "serve", "--port", str(port), "--data-dir", str(data_dir),
          "--fsync", "never", "--log-level", "warning"], stdout=log, stderr=subprocess.STDOUT,
-        preexec_fn=partial(runner.die_with_parent, os.getpid()))
+        preexec_fn=partial(parallel.die_with_parent, os.getpid()))
     try:
         for _ in range(300):
             if process.poll() is not None:

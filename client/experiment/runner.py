@@ -1,36 +1,22 @@
-"""Run arms x runs x episodes of car following, each run in its own process, each shielded run
-with its own model (in-process, or on a shield service reached over HTTP, WebSocket or batch).
+"""One run of an arm: car following for its episodes, its shielded steps on a model of its own
+(in-process, or on a shield service reached over HTTP, WebSocket or batch), its records.
 
 Runs are deterministic for their seed, so an interrupted run is resumed by playing it again
 from the start: the episodes already recorded must come out identical (checked), and only the
-missing ones are appended. Lockstep groups also write checkpoints (:mod:`.checkpoint`) and
-continue from the latest instead of from the start.
+missing ones are appended. Runs of DDPG can also step together (:mod:`.lockstep`), and an
+experiment's runs play in worker processes (:mod:`.parallel`).
 """
 
 from __future__ import annotations
 
-import ctypes
 import dataclasses
 import gzip
 import json
-import multiprocessing
-import os
 import platform
-import signal
-import sys
 import time
 from collections import Counter
-from collections.abc import Callable, Sequence
-from concurrent.futures import (
-    FIRST_COMPLETED,
-    Future,
-    ProcessPoolExecutor,
-    ThreadPoolExecutor,
-    wait,
-)
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import partial
-from multiprocessing.managers import SyncManager
 from pathlib import Path
 from typing import IO, Any, Literal, Protocol
 
@@ -40,16 +26,14 @@ import app
 from app.core import Shield, ShieldConfig
 from app.service import codec
 from client.agents.idm import PRESETS, RandomController
-from client.experiment import checkpoint, records
+from client.experiment import records
 from client.experiment.records import EpisodeRecord, RecordError
 from client.experiment.trace import TraceWriter
 from client.shield import BatchShield, LocalShield, ShieldClient, ShieldSession, StepShield
-from client.shield.remote import step_body
 from client.shield.wrapper import ShieldWrapper
 from client.sim import lead
 from client.sim.car_following import CarFollowingEnv, RewardConfig
 
-PR_SET_PDEATHSIG = 1  # prctl(2)
 CONTROLLERS = ("ddpg", "idm", "idm-aggressive", "random")
 MODES = ("shield", "shadow")
 
@@ -364,7 +348,7 @@ class Run:
         records.release(self.claim, self.path)
 
 
-def _torch_for_one_core() -> None:
+def torch_for_one_core() -> None:
     import torch
 
     torch.set_num_threads(1)
@@ -377,7 +361,7 @@ def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str 
     """Play one run to ``config.episodes``, or until ``stop`` (asked after every episode) says
     to stop, and keep its shield model (:meth:`Run.keep_model`); returns the number of
     episodes appended. A stopped run goes on by replaying what it recorded."""
-    _torch_for_one_core()
+    torch_for_one_core()
     state = Run.open(config, arm, run, out, token, trace=trace)
     if state.complete:
         state.close()
@@ -409,312 +393,3 @@ def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str 
     finally:
         state.close()
     return state.appended
-
-
-@dataclass
-class Place:
-    """Where a lockstep run stands: its episode, what that episode did so far, and its last
-    observations (the controller's and the e-FSM's)."""
-
-    episode: int
-    meter: EpisodeMeter
-    started: float
-    obs: Any
-    z: Any
-
-    @classmethod
-    def start(cls, run: Run) -> Place:
-        obs, info = run.env.reset(seed=run.seed)
-        return cls(1, EpisodeMeter(), time.perf_counter(), obs, info["efsm_observation"])
-
-    def state(self, run: Run) -> dict[str, Any]:
-        """The place with the simulator's state and the shield model's, for a checkpoint."""
-        return {"episode": self.episode, "meter": self.meter, "obs": self.obs, "z": self.z,
-                "elapsed": time.perf_counter() - self.started, "env": run.env.state(),
-                "model": None if run.shield is None else
-                model_state(run.config, run.arm, run.index, run.shield, run.token)}
-
-    @classmethod
-    def restore(cls, run: Run, state: dict[str, Any]) -> Place:
-        run.env.restore(state["env"])
-        return cls(state["episode"], state["meter"], time.perf_counter() - state["elapsed"],
-                   state["obs"], state["z"])
-
-
-def past(deadline: float) -> bool:
-    """Whether the wall clock has passed ``deadline`` (seconds since the epoch)."""
-    return time.time() >= deadline
-
-
-def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | None = None,
-                 progress: Any | None = None, trace: bool = False,
-                 indices: Sequence[int] | None = None, device: str = "cpu",
-                 checkpoint_every: float | None = None,
-                 stop: Callable[[], bool] | None = None) -> int:
-    """The runs of a DDPG arm (all, or those ``indices``) in one process, stepping together: one
-    batched DDPG update for all runs per step (:class:`~client.agents.ensemble.DDPGEnsemble`,
-    on ``device``), and one round of shield requests per step: with the batch transport one
-    request carrying a step of every run's model, over WebSocket every run's step sent before
-    any reply is read. Each run sees the same sequence as :func:`run_one` (act, shield, step,
-    remember, update); results agree within the rounding of batched arithmetic.
-
-    The group saves a checkpoint every ``checkpoint_every`` seconds, and when ``stop`` (asked
-    after every step) says to stop, before returning; a group with a checkpoint continues from
-    it. Done or stopped, the runs keep their shield models (:meth:`Run.keep_model`). Returns
-    the number of episodes appended."""
-    from client.agents.ddpg import DDPGConfig
-    from client.agents.ensemble import DDPGEnsemble
-
-    controller, mode = parse_arm(arm)
-    if controller != "ddpg":
-        raise ValueError(f"lockstep training is for DDPG arms, not {arm!r}")
-    if trace and (checkpoint_every is not None or stop is not None):
-        raise ValueError("a traced experiment replays from the start: no checkpoints")
-    if stop is not None and stop():
-        return 0
-    if device.startswith("cuda"):  # cuBLAS is deterministic only with a fixed workspace
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
-    _torch_for_one_core()
-    learning = {"lockstep": True, "device": device}
-    group = list(range(config.runs) if indices is None else indices)
-    saved_at = checkpoint.path_for(out, arm, group)
-    identity = {**config.identity(), "arm": arm, "group": group, "learning": learning}
-    saved = checkpoint.load(saved_at, identity)
-    runs = []
-    for i in group if saved is None else saved["active"]:
-        model = None if saved is None else saved["places"][i]["model"]
-        run = Run.open(config, arm, i, out, token, wrap=False, trace=trace, learning=learning,
-                       model=model)
-        if run.complete and saved is None:
-            run.close()
-        else:  # a run of a checkpoint is played on: the members' arithmetic is batched
-            runs.append(run)
-    if not runs:
-        return 0
-    shield = Lockstep(runs, config, arm, shadow=mode == "shadow") if mode else None
-    learner = DDPGEnsemble(DDPGConfig(**config.ddpg), [r.seed for r in runs], device)
-    if saved is None:
-        places = [Place.start(r) for r in runs]
-        for member in learner.members:
-            member.noise.reset()
-    else:
-        places = [Place.restore(r, saved["places"][r.index]) for r in runs]
-        learner.restore(saved["learner"])
-    active = list(range(len(runs)))
-
-    def save() -> None:
-        if shield:
-            shield.send_closing()
-        checkpoint.save(saved_at, identity, {
-            "active": [runs[k].index for k in active], "learner": learner.state(),
-            "places": {runs[k].index: places[k].state(runs[k]) for k in active}})
-
-    next_save = time.monotonic() + (checkpoint_every or 0.0)
-    proposals = [0.0] * len(runs)
-    try:
-        while active:  # learner member j is run active[j]
-            for k, a in zip(active, learner.act(np.stack([places[k].obs for k in active])),
-                            strict=True):
-                proposals[k] = a
-            decisions = shield.decide(active, [p.z for p in places], proposals) \
-                if shield else [None] * len(active)
-            going = list(active)
-            for j, (k, decision) in enumerate(zip(list(active), decisions, strict=True)):
-                place = places[k]
-                action = proposals[k] if decision is None else float(decision.action)
-                next_obs, reward, terminated, truncated, info = runs[k].env.step(
-                    np.array([action], np.float32))
-                if decision is not None:
-                    info["shield"], info["shield_observation"] = decision, place.z
-                recorder = runs[k].recorder(place.episode)
-                if recorder is not None:
-                    recorder(proposals[k], info)
-                executed = place.meter.add(proposals[k], reward, info)
-                learner.members[j].remember(place.obs, executed, reward, next_obs, terminated)
-                place.obs, place.z = next_obs, info["efsm_observation"]
-                if terminated or truncated:
-                    finish = _finisher(runs[k], place.episode, place.meter, info,
-                                       place.started, progress)
-                    if shield:  # the record waits for the closing decision's state count
-                        shield.close_episode(k, place.z, info["event"], finish)
-                    else:
-                        finish(None)
-                    place.episode += 1
-                    if place.episode > config.episodes:
-                        going.remove(k)
-                        continue
-                    place.obs, reset_info = runs[k].env.reset()
-                    place.z = reset_info["efsm_observation"]
-                    place.meter, place.started = EpisodeMeter(), time.perf_counter()
-                    learner.members[j].noise.reset()
-            learner.update()
-            if len(going) < len(active):  # finished runs learn no more: drop their learners
-                if going:
-                    learner.keep([active.index(k) for k in going])
-                active = going
-            if active and checkpoint_every is not None and time.monotonic() >= next_save:
-                save()
-                next_save = time.monotonic() + checkpoint_every
-            if active and stop is not None and stop():
-                save()
-                break
-        if shield:
-            shield.flush()
-            for r in runs:
-                r.keep_model()
-        if not active:
-            checkpoint.remove(saved_at)
-    finally:
-        for r in runs:
-            r.close()
-    return sum(r.appended for r in runs)
-
-
-def _finisher(run: Run, episode: int, meter: EpisodeMeter, info: dict[str, Any], start: float,
-              progress: Any | None) -> Callable[[Any], None]:
-    wall = time.perf_counter() - start
-
-    def finish(closing: Any) -> None:
-        if closing is not None:
-            info["shield_done"] = closing
-        run.finish(episode, meter.result(info), wall, progress)
-
-    return finish
-
-
-class Lockstep:
-    """The shields of lockstep runs, one round per step: the pending episode ends first, then a
-    step of every active run (each model sees its steps in order). Over the batch transport
-    the round is one request per service, all in flight at once; over WebSocket every run's
-    frame is sent before any reply is read; otherwise each run's own shield is asked in
-    turn."""
-
-    def __init__(self, runs: list[Run], config: ExperimentConfig, arm: str,
-                 shadow: bool) -> None:
-        self.runs = runs
-        self.shadow = shadow
-        self.names = [model_name(config, arm, r.index) for r in runs]
-        # the batch transport: run k's requests go to service_of[k] with the shield of the
-        # first run there (one request per service and round)
-        batch = [r.shield for r in runs if isinstance(r.shield, BatchShield)]
-        self.service_of = [config.shield_url(r.index) for r in runs] \
-            if len(batch) == len(runs) else []
-        self.carriers: dict[str, BatchShield] = {}
-        for url, shield in zip(self.service_of, batch, strict=False):
-            self.carriers.setdefault(url, shield)
-        self.pool = ThreadPoolExecutor(len(self.carriers)) if len(self.carriers) > 1 else None
-        self.closing: list[tuple[int, dict[str, Any], Callable[[Any], None]]] = []
-
-    def close_episode(self, k: int, z: Any, event: str | None,
-                      finish: Callable[[Any], None]) -> None:
-        """Queue run k's episode end for the next round."""
-        body = step_body(z, None, done=True, event=event, shadow=self.shadow)
-        self.closing.append((k, body, finish))
-
-    def decide(self, active: list[int], z: list[Any], proposals: list[float]) -> list[Any]:
-        """Send the queued episode ends, then one step of every active run."""
-        requests = [(k, body) for k, body, _ in self.closing] + [
-            (k, step_body(z[k], proposals[k], shadow=self.shadow)) for k in active]
-        decisions = self._send(requests)
-        for (_, _, finish), closing in zip(self.closing, decisions, strict=False):
-            finish(closing)
-        answered = decisions[len(self.closing):]
-        self.closing = []
-        return answered
-
-    def send_closing(self) -> None:
-        """Send the queued episode ends now: each model still sees its own steps in order."""
-        if self.closing:
-            self.decide([], [], [])
-
-    def flush(self) -> None:
-        """Send the episode ends still queued when the runs are over, and let the threads of
-        the batch requests go."""
-        self.send_closing()
-        if self.pool is not None:
-            self.pool.shutdown()
-
-    def _send(self, requests: list[tuple[int, dict[str, Any]]]) -> list[Any]:
-        if self.carriers:
-            return self._send_batches(requests)
-        sessions = [self.runs[k].shield for k, _ in requests]
-        if all(isinstance(s, ShieldSession) for s in sessions):
-            return ShieldSession.revise_across(
-                [(s, body) for s, (_, body) in zip(sessions, requests, strict=True)])  # type: ignore[misc]
-        out = []
-        for k, body in requests:
-            shield = self.runs[k].shield
-            assert shield is not None
-            options = {key: v for key, v in body.items() if key not in ("observation", "action")}
-            out.append(shield.revise(body["observation"], body["action"], **options))
-        return out
-
-    def _send_batches(self, requests: list[tuple[int, dict[str, Any]]]) -> list[Any]:
-        """One batch request per service; the decisions back in the order of ``requests``."""
-        rounds: dict[str, list[tuple[str, dict[str, Any]]]] = {}
-        for k, body in requests:
-            rounds.setdefault(self.service_of[k], []).append((self.names[k], body))
-        if self.pool is None:
-            answers = [self.carriers[url].revise_many(steps) for url, steps in rounds.items()]
-        else:
-            answers = BatchShield.revise_across(
-                [(self.carriers[url], steps) for url, steps in rounds.items()], self.pool)
-        decisions = {url: iter(a) for url, a in zip(rounds, answers, strict=True)}
-        return [next(decisions[self.service_of[k]]) for k, _ in requests]
-
-
-def die_with_parent(parent: int) -> None:
-    """A worker (or the progress queue's manager, or the demo's shield service) ends with the
-    process that started it, even one killed outright: an orphan would go on appending to
-    records that a restarted experiment is writing too, or linger."""
-    if sys.platform == "linux":
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
-        if os.getppid() != parent:  # the parent died before the call
-            os._exit(1)
-
-
-def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None = None,
-            bar: Any | None = None, lockstep: int = 0, trace: bool = False,
-            device: str = "cpu", checkpoint_every: float | None = None,
-            deadline: float | None = None) -> int:
-    """Every (arm, run) in its own process, at most ``workers`` at a time. With ``lockstep``
-    N > 0 the runs of each DDPG arm go N to a process, each group with one batched update on
-    ``device``, saving a checkpoint every ``checkpoint_every`` seconds and stopping (with one)
-    at ``deadline`` (seconds since the epoch); other runs stop at the deadline after their
-    episode. With ``trace`` shielded runs write step traces."""
-    if device != "cpu" and not lockstep:
-        raise ValueError(f"learning on {device!r} is for lockstep runs (--lockstep)")
-    if checkpoint_every is not None and not lockstep:
-        raise ValueError("checkpoints are written by lockstep runs (--lockstep)")
-    stop = None if deadline is None else partial(past, deadline)
-    jobs: list[tuple[Callable[..., int], tuple[Any, ...]]] = []
-    for arm in config.arms:
-        if lockstep and parse_arm(arm)[0] == "ddpg":
-            for first in range(0, config.runs, lockstep):
-                group = list(range(first, min(first + lockstep, config.runs)))
-                jobs.append((partial(run_lockstep, indices=group, device=device,
-                                     checkpoint_every=checkpoint_every, stop=stop),
-                             (config, arm, out, token)))
-        else:
-            jobs.extend((partial(run_one, stop=stop), (config, arm, run, out, token))
-                        for run in range(config.runs))
-    context = multiprocessing.get_context("spawn")
-    manager = SyncManager(ctx=context)
-    manager.start(die_with_parent, (os.getpid(),))
-    with manager, ProcessPoolExecutor(
-            workers, mp_context=context, initializer=die_with_parent,
-            initargs=(os.getpid(),)) as pool:
-        progress = manager.Queue()
-        pending: set[Future[int]] = {pool.submit(job, *args, progress, trace)
-                                     for job, args in jobs}
-        appended = 0
-        while pending:
-            finished, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
-            while not progress.empty():
-                progress.get()
-                if bar is not None:
-                    bar.update(1)
-            for future in finished:
-                appended += future.result()
-        return appended

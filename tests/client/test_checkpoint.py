@@ -19,6 +19,7 @@ from app.service import codec
 from client.agents.ddpg import DDPGConfig
 from client.agents.ensemble import DDPGEnsemble
 from client.experiment import checkpoint, records, runner
+from client.experiment.lockstep import run_lockstep
 from client.experiment.records import EpisodeRecord, RecordError
 from client.sim.car_following import CarFollowingEnv
 from client.sim.lead import synthetic
@@ -49,7 +50,7 @@ def after(steps: int) -> Callable[[], bool]:
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> list[EpisodeRecord]:
     out = tmp_path_factory.mktemp("whole")
-    assert runner.run_lockstep(CONFIG, ARM, out) == CONFIG.runs * CONFIG.episodes
+    assert run_lockstep(CONFIG, ARM, out) == CONFIG.runs * CONFIG.episodes
     assert not checkpoint.pending(out)
     return recorded(out)
 
@@ -99,10 +100,10 @@ def test_a_group_stopped_again_and_again_records_what_an_uninterrupted_one_recor
     done: each stop leaves a checkpoint, each call goes on from it, and the records come out
     identical to the bit."""
     stops = 0
-    runner.run_lockstep(CONFIG, ARM, tmp_path, stop=after(every))
+    run_lockstep(CONFIG, ARM, tmp_path, stop=after(every))
     while checkpoint.pending(tmp_path):
         stops += 1
-        runner.run_lockstep(CONFIG, ARM, tmp_path, stop=after(every))
+        run_lockstep(CONFIG, ARM, tmp_path, stop=after(every))
     assert stops >= 2
     assert recorded(tmp_path) == uninterrupted
 
@@ -126,11 +127,11 @@ def test_a_crashed_group_goes_on_from_its_last_checkpoint(
         return check
 
     with pytest.raises(Crash):
-        runner.run_lockstep(CONFIG, ARM, tmp_path, checkpoint_every=0.3, stop=crash_after(800))
+        run_lockstep(CONFIG, ARM, tmp_path, checkpoint_every=0.3, stop=crash_after(800))
     saved = checkpoint.load(checkpoint.pending(tmp_path)[0], IDENTITY)
     assert saved is not None
     before = len(recorded(tmp_path))
-    assert runner.run_lockstep(CONFIG, ARM, tmp_path) == len(uninterrupted) - before
+    assert run_lockstep(CONFIG, ARM, tmp_path) == len(uninterrupted) - before
     assert recorded(tmp_path) == uninterrupted
     assert not checkpoint.pending(tmp_path)  # done: removed
 
@@ -138,7 +139,7 @@ def test_a_crashed_group_goes_on_from_its_last_checkpoint(
 def test_a_stopped_group_keeps_the_models_of_its_checkpoint(tmp_path: Path) -> None:
     """OUT/models holds each run's model where the group stopped: the checkpoint's, in the
     form PUT /models/{name} takes."""
-    runner.run_lockstep(CONFIG, ARM, tmp_path, stop=after(300))
+    run_lockstep(CONFIG, ARM, tmp_path, stop=after(300))
     saved = checkpoint.load(checkpoint.pending(tmp_path)[0], IDENTITY)
     assert saved is not None
     for run in range(CONFIG.runs):
@@ -149,10 +150,10 @@ def test_a_stopped_group_keeps_the_models_of_its_checkpoint(tmp_path: Path) -> N
 
 
 def test_a_checkpoint_of_another_experiment_is_refused(tmp_path: Path) -> None:
-    runner.run_lockstep(CONFIG, ARM, tmp_path, stop=after(50))
+    run_lockstep(CONFIG, ARM, tmp_path, stop=after(50))
     other = dataclasses.replace(CONFIG, seed=8)
     with pytest.raises(RecordError, match="another experiment"):
-        runner.run_lockstep(other, ARM, tmp_path)
+        run_lockstep(other, ARM, tmp_path)
 
 
 def test_a_group_goes_on_against_a_fresh_service(
@@ -165,7 +166,7 @@ def test_a_group_goes_on_against_a_fresh_service(
         server = start_server(tmp_path / f"data-{stops}", "--fsync", "never")
         remote = dataclasses.replace(CONFIG, shield=server.url, transport="batch")
         try:
-            runner.run_lockstep(remote, ARM, tmp_path / "out",
+            run_lockstep(remote, ARM, tmp_path / "out",
                                 stop=after(400) if stops == 1 else None)
         finally:
             server.stop()

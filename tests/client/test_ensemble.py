@@ -13,7 +13,8 @@ from bench.rounding_drift import CONFIG as CONFIG_DRIFT
 from bench.rounding_drift import SEEDS, train_side_by_side
 from client.agents.ddpg import DDPG, DDPGConfig
 from client.agents.ensemble import DDPGEnsemble
-from client.experiment import records, runner
+from client.experiment import parallel, records, runner
+from client.experiment.lockstep import run_lockstep
 
 # Batched products may round differently from single ones, and learning amplifies any such
 # difference (bench/rounding_drift.py, whose training loop this test runs). On the CPU, where
@@ -63,7 +64,7 @@ def test_lockstep_runs_record_what_separate_runs_record(tmp_path: Path) -> None:
     separate, lockstep = tmp_path / "separate", tmp_path / "lockstep"
     for run in range(CONFIG.runs):
         runner.run_one(CONFIG, "ddpg+shield", run, separate)
-    assert runner.run_lockstep(CONFIG, "ddpg+shield", lockstep) == CONFIG.runs * CONFIG.episodes
+    assert run_lockstep(CONFIG, "ddpg+shield", lockstep) == CONFIG.runs * CONFIG.episodes
     before = CONFIG.shield_config["reviser"]["activate_after_episodes"]
     for run in range(CONFIG.runs):
         a, b = episodes(separate, run), episodes(lockstep, run)
@@ -73,15 +74,15 @@ def test_lockstep_runs_record_what_separate_runs_record(tmp_path: Path) -> None:
         assert [r.episode_return for r in b[:before]] == pytest.approx(
             [r.episode_return for r in a[:before]], rel=1e-4)
     # and a lockstep experiment resumes like any other
-    assert runner.run_lockstep(CONFIG, "ddpg+shield", lockstep) == 0
+    assert run_lockstep(CONFIG, "ddpg+shield", lockstep) == 0
     bigger = dataclasses.replace(CONFIG, episodes=6)
     with pytest.raises(records.RecordError):
-        runner.run_lockstep(bigger, "ddpg+shield", lockstep)  # another configuration
+        run_lockstep(bigger, "ddpg+shield", lockstep)  # another configuration
 
 
 def test_lockstep_is_for_ddpg_arms(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="DDPG arms"):
-        runner.run_lockstep(dataclasses.replace(CONFIG, arms=("idm",)), "idm", tmp_path)
+        run_lockstep(dataclasses.replace(CONFIG, arms=("idm",)), "idm", tmp_path)
 
 
 @pytest.mark.parametrize("transport", ["batch", "ws"])
@@ -97,8 +98,8 @@ def test_lockstep_against_a_service_equals_lockstep_in_process(tmp_path: Path,
     try:
         remote = dataclasses.replace(CONFIG, shield=server.url, transport=transport)
         local_dir, remote_dir = tmp_path / "local", tmp_path / "remote"
-        runner.run_lockstep(CONFIG, "ddpg+shield", local_dir)
-        runner.run_lockstep(remote, "ddpg+shield", remote_dir)
+        run_lockstep(CONFIG, "ddpg+shield", local_dir)
+        run_lockstep(remote, "ddpg+shield", remote_dir)
         for run in range(CONFIG.runs):
             a = [dataclasses.replace(r, wall_s=0.0) for r in episodes(local_dir, run)]
             b = [dataclasses.replace(r, wall_s=0.0) for r in episodes(remote_dir, run)]
@@ -137,8 +138,8 @@ def test_lockstep_groups_record_every_run_and_how_it_learned(tmp_path: Path) -> 
     """Three runs two to a process: every run is recorded, the groups' runs start as they do
     in one group of three, and each header says the learner ran in lockstep on the CPU."""
     whole, grouped = tmp_path / "whole", tmp_path / "grouped"
-    runner.run_lockstep(CONFIG, "ddpg+shield", whole)
-    assert runner.run_all(CONFIG, grouped, workers=2, lockstep=2) == CONFIG.runs * CONFIG.episodes
+    run_lockstep(CONFIG, "ddpg+shield", whole)
+    assert parallel.run_all(CONFIG, grouped, workers=2, lockstep=2) == CONFIG.runs * CONFIG.episodes
     before = CONFIG.shield_config["reviser"]["activate_after_episodes"]
     for run in range(CONFIG.runs):
         a, b = episodes(whole, run), episodes(grouped, run)
@@ -151,4 +152,4 @@ def test_lockstep_groups_record_every_run_and_how_it_learned(tmp_path: Path) -> 
 
 def test_learning_on_a_device_is_for_lockstep_runs(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="lockstep"):
-        runner.run_all(CONFIG, tmp_path, workers=1, device="cuda")
+        parallel.run_all(CONFIG, tmp_path, workers=1, device="cuda")

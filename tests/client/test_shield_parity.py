@@ -154,6 +154,7 @@ def test_lockstep_over_the_batch_route_across_services(
     import dataclasses
 
     from client.experiment import records, runner
+    from client.experiment.lockstep import run_lockstep
 
     sidecar = start_server(tmp_path_factory.mktemp("lockstep") / "data", "--fsync", "never")
     try:
@@ -165,8 +166,8 @@ def test_lockstep_over_the_batch_route_across_services(
                                      transport="batch")
         local_dir = tmp_path_factory.mktemp("lockstep-local")
         remote_dir = tmp_path_factory.mktemp("lockstep-remote")
-        runner.run_lockstep(config, config.arms[0], local_dir)
-        assert runner.run_lockstep(remote, config.arms[0], remote_dir) == 6
+        run_lockstep(config, config.arms[0], local_dir)
+        assert run_lockstep(remote, config.arms[0], remote_dir) == 6
         for url, mine in ((server.url, (0, 2)), (sidecar.url, (1,))):
             with ShieldClient(url) as admin:
                 held = {m["name"] for m in admin.models()}
