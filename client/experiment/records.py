@@ -40,6 +40,13 @@ class EpisodeRecord:
     wall_s: float = 0.0
 
 
+def same_course(a: EpisodeRecord, b: EpisodeRecord) -> bool:
+    """Whether two records of an episode tell the same course: its length, its outcome and the
+    revisions on the way. Speeds and returns can differ in their last digits between
+    machines whose arithmetic rounds differently while the episode goes the same way."""
+    return (a.steps, a.outcome, a.interventions) == (b.steps, b.outcome, b.interventions)
+
+
 class RecordError(Exception):
     """A record file is missing, damaged or from another configuration."""
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from client.experiment.records import EpisodeRecord, RecordError, read_all
+from client.experiment.records import EpisodeRecord, RecordError, read_all, same_course
 
 FAILURES = ("large_distance", "collision")
 
@@ -249,10 +249,12 @@ def side_by_side(summary: dict[str, Any]) -> str:
 
 def parting(first: list[EpisodeRecord], other: list[EpisodeRecord]) -> dict[tuple[str, int], str]:
     """Per run of ``first`` (arm, run), where the same run in ``other`` goes another way: the
-    first episode whose record differs in anything but its wall time, "none in N" where the
-    two agree on all N episodes both hold, "other seed" where the two were seeded apart (not
-    the same run), "-" where ``other`` lacks the run. Paired ablations share their seeds, so
-    a switch shows first where its run parts."""
+    first episode of another course (:func:`~client.experiment.records.same_course`), with
+    "(rounding from E)" where the records already differed in anything but the wall time
+    from an earlier episode E (another machine's arithmetic); "none in N" where the two
+    agree on all N episodes both hold, "other seed" where the two were seeded apart (not the
+    same run), "-" where ``other`` lacks the run. Paired ablations share their seeds, so a
+    switch shows first where its run parts."""
     def runs(episodes: list[EpisodeRecord]) -> dict[tuple[str, int], list[EpisodeRecord]]:
         grouped: dict[tuple[str, int], list[EpisodeRecord]] = defaultdict(list)
         for r in sorted(episodes, key=lambda r: (r.arm, r.run, r.episode)):
@@ -268,18 +270,20 @@ def parting(first: list[EpisodeRecord], other: list[EpisodeRecord]) -> dict[tupl
         elif paired[0].seed != mine[0].seed:
             where[key] = "other seed"
         else:
-            both = zip(mine, paired, strict=False)  # as far as the shorter run went
-            differ = next((a.episode for a, b in both if a != b), None)
-            where[key] = f"none in {min(len(mine), len(paired))}" if differ is None \
-                else str(differ)
+            both = list(zip(mine, paired, strict=False))  # as far as the shorter run went
+            course = next((a.episode for a, b in both if not same_course(a, b)), None)
+            digits = next((a.episode for a, b in both if a != b), None)
+            where[key] = f"none in {len(both)}" if course is None else str(course)
+            if digits is not None and digits != course:
+                where[key] += f" (rounding from {digits})"
     return where
 
 
 def partings_table(names: list[str], episodes: list[list[EpisodeRecord]]) -> str:
     """Where each run of the later experiments parts from the same run of the first."""
     columns = [parting(episodes[0], other) for other in episodes[1:]]
-    lines = [f"Where each run parts from the same run of {names[0]} (the first episode that "
-             "went differently):", "",
+    lines = [f"Where each run parts from the same run of {names[0]} (the first episode of "
+             "another length, outcome or revisions):", "",
              f"| arm | run | {' | '.join(names[1:])} |", "|---|---:|" + "---:|" * len(columns)]
     for arm, run in columns[0]:
         lines.append(f"| {arm} | {run} | {' | '.join(c[(arm, run)] for c in columns)} |")

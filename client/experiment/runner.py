@@ -313,8 +313,7 @@ class Run:
                                wall_s=wall_s, **measured)
         if episode <= len(self.recorded):
             old = self.recorded[episode - 1]
-            if (old.steps, old.outcome, old.interventions) != (
-                    record.steps, record.outcome, record.interventions):
+            if not records.same_course(old, record):
                 raise RecordError(replay_mismatch(self.path, episode))
             return
         records.append(self.path, record)
