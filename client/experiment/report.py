@@ -365,11 +365,10 @@ def first_episodes(episodes: list[EpisodeRecord], limit: int) -> list[EpisodeRec
     counts: dict[tuple[str, int], int] = defaultdict(int)
     for r in episodes:
         counts[(r.arm, r.run)] += 1
-    short = sorted(key for key, count in counts.items() if count < limit)
-    if short:
-        arm, run = short[0]
-        raise RecordError(f"run {run} of {arm} has only {counts[short[0]]} episodes; "
-                          f"--episodes must be at most {min(counts.values())}")
+    (arm, run), fewest = min(counts.items(), key=lambda item: (item[1], item[0]))
+    if fewest < limit:
+        raise RecordError(f"run {run} of {arm} has only {fewest} episodes; "
+                          f"--episodes must be at most {fewest}")
     return [r for r in episodes if r.episode <= limit]
 
 

@@ -331,6 +331,10 @@ def test_report_of_each_runs_first_episodes(tmp_path: Path) -> None:
     assert result.returncode == 2
     assert "run 1 of idm-aggressive has only 5 episodes; --episodes must be at most 5" \
         in result.stderr
+    uneven = [record(0, e, "success") for e in range(1, 4)] + [record(1, 1, "success")]
+    with pytest.raises(records.RecordError, match="run 1 of a has only 1 episodes; "
+                       "--episodes must be at most 1"):  # the shortest run, not the first
+        report.first_episodes(uneven, 4)
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
