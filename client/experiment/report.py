@@ -365,7 +365,8 @@ def first_episodes(episodes: list[EpisodeRecord], limit: int) -> list[EpisodeRec
     counts: dict[tuple[str, int], int] = defaultdict(int)
     for r in episodes:
         counts[(r.arm, r.run)] += 1
-    (arm, run), fewest = min(counts.items(), key=lambda item: (item[1], item[0]))
+    (arm, run), fewest = min(counts.items(), key=lambda item: (item[1], item[0]),
+                             default=(("", 0), limit))
     if fewest < limit:
         raise RecordError(f"run {run} of {arm} has only {fewest} episodes; "
                           f"--episodes must be at most {fewest}")
