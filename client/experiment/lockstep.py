@@ -58,7 +58,6 @@ class Place:
                    state["obs"], state["z"])
 
 
-
 def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | None = None,
                  progress: Any | None = None, trace: bool = False,
                  indices: Sequence[int] | None = None, device: str = "cpu",
