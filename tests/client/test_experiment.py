@@ -335,6 +335,7 @@ def test_report_of_each_runs_first_episodes(tmp_path: Path) -> None:
     with pytest.raises(records.RecordError, match="run 1 of a has only 1 episodes; "
                        "--episodes must be at most 1"):  # the shortest run, not the first
         report.first_episodes(uneven, 4)
+    assert report.first_episodes([], 4) == []  # an experiment with no episodes yet
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
