@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Count-based flags per entry with a two-step prediction, against flags per entry alone (both
-# on the double knee, today's default). Why: a two-step prediction helped sticky flags on
+# on the double knee, the default then). Why: a two-step prediction helped sticky flags on
 # tuning seed 4 (89.3% against 86.7%) and not today's count-based flags, whose flags lift
 # sooner when the shield keeps the car out of flagged states (results/README.md, "A two-step
 # prediction"). Flags per entry held the states of crashes and lifted those of ordinary

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Does the revision noise make the shield hurt a deterministic controller? With today's default
+# Does the revision noise make the shield hurt a deterministic controller? With the default then
 # the aggressive IDM follower collided more with the shield than without it on the evaluation
 # seeds (reduced/other-controllers-eps-0.15), although every revision was a slower action:
 # a revised action is the chosen bin's midpoint plus N(0, V), V = a_max / max(1, K episode),

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The inspection rule (A5) at today's defaults (50 m headway scale, epsilon 0.15) on the tuning
+# The inspection rule (A5) at the defaults then (50 m headway scale, epsilon 0.15) on the tuning
 # seeds 0-2, 2 runs x 250 episodes each, in-process shields: the literal first-by-index
 # reading, which did best on the reduced protocol at the 200 m scale but was never tuned,
 # against "any" (the default), whose rows are the epsilon 0.15 rows of results/epsilon.sh

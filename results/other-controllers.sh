@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The shield in front of controllers it was not built around, with today's default (epsilon
+# The shield in front of controllers it was not built around, with the default then (epsilon
 # 0.15, headway by 50 m, count-based flags): the IDM follower, an aggressive IDM and the random
 # controller, each with and without the shield; then the shielded arms again with one-sided
 # revisions (tried on tuning seed 4 after the default shield hurt the aggressive IDM:

@@ -4,13 +4,16 @@
 # a shield service of its own over WebSocket (a sidecar per controller, in-memory models); all
 # 20 runs train in parallel processes, so it wants 16 cores or more.
 #
-#   results/paper-protocol.sh [OUT]          (default OUT: results/paper-protocol-knee)
+#   results/paper-protocol.sh [OUT]          (default OUT: results/paper-protocol-default)
 #
 # results/paper-protocol holds the partial run made when the default normalised the headway by
 # 200 m; to continue that one, check out commit 1f428c5 and pass it as OUT. Likewise
 # results/paper-protocol-50m, made with epsilon 0.3: commit 083199b;
-# results/paper-protocol-eps-0.15, made with one-sided revisions off: commit c520107; and
-# results/paper-protocol-one-sided, made without the knee: commit 7cf2170.
+# results/paper-protocol-eps-0.15, made with one-sided revisions off: commit c520107;
+# results/paper-protocol-one-sided, made without the knee: commit 7cf2170; and
+# results/paper-protocol-knee, made with flags per recognition: commit 2cac6a3.
+# results/paper-protocol-entry-rate ran today's default as overrides (SHIELD_CONFIG, below):
+# the same overrides regenerate it (results/README.md has the command).
 #
 # How the runs learn, and how they reach the shield:
 #
@@ -46,7 +49,7 @@
 # two groups of 5 or with SERVICES=2 (bench/layouts.sh, BENCHMARKS.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-out=${1:-results/paper-protocol-knee}
+out=${1:-results/paper-protocol-default}
 runs=${RUNS:-10}
 episodes=${EPISODES:-1500}
 first_port=${PORT:-8300}

@@ -6,8 +6,9 @@
 # spawned per run index), recomputed here. Rows: DDPG alone; the shield with one-sided
 # revisions off (ddpg-shield, recorded with `{}` while off was the default: commit c520107,
 # the last such, regenerates it; later code refuses to extend it); and one-sided revisions
-# (ddpg-shield-one-sided, today's default, asked for explicitly); and the double knee
-# (ddpg-shield-knee-double, tuned by results/knee-double.sh on seeds 4 and 5). One table:
+# (ddpg-shield-one-sided, the default then, asked for explicitly); and the double knee
+# (ddpg-shield-knee-double, tuned by results/knee-double.sh on seeds 4 and 5; recorded with
+# flags per recognition, the default until commit 2cac6a3, which regenerates it). One table:
 # results/reduced/four-runs/four-runs.md. Resumable: finished experiments are skipped.
 set -euo pipefail
 cd "$(dirname "$0")/.."

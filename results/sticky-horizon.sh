@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Sticky flags with a two-step prediction, against sticky flags alone (both on the double
-# knee, today's default). Why: with sticky flags the shield went on revising late in training
+# knee, the default then). Why: with sticky flags the shield went on revising late in training
 # and led on both tuning seeds, but in one run it crashed 47 times in 100 episodes, every crash
 # in a state flagged for it: a one-step prediction (0.25 s) sees the flagged state only when
 # the car is already in it or next to it, while closing at 17 m/s needs some 35 steps of full

@@ -178,15 +178,19 @@ def test_a_snapshot_from_before_a_switch_restores_with_the_behaviour_of_its_time
 
 
 def test_a_snapshot_from_before_entries_were_counted_restores_and_counts_on() -> None:
-    shield = Shield(cliff_config(activate_after_episodes=5))
+    shield = Shield(cliff_config(activate_after_episodes=5, flag_rate_per="recognition",
+                                 flag_min_rate=0.002))
     run_cliff(shield, 30, seed=4)
     old = shield.snapshot()
     del old["flags"]["entries"]
+    for name in ("flag_rate_per", "flag_min_rate"):  # written before these fields existed
+        del old["config"]["reviser"][name]
     copy = Shield.from_snapshot(old)
+    assert copy.config == shield.config  # its flags still count recognitions, at 0.002
     assert copy.flags.entries.tolist() == [0] * copy.n_states
     _, original = run_cliff(shield, 30, seed=9)
     _, restored = run_cliff(copy, 30, seed=9)
-    assert restored == original  # recognitions decide by default, as before
+    assert restored == original
     assert copy.flags.entries.sum() > 0
 
 

@@ -120,7 +120,8 @@ def test_a4_sticky_flags_survive_a_later_uneventful_visit() -> None:
 
 def test_a4_rate_flags_follow_the_share_of_failures_among_recognitions() -> None:
     """Count-based flags (A4 c): a state is flagged while its failures are frequent enough."""
-    shield = shield_with(reviser=ReviserConfig(flags="rate", flag_min_rate=0.1))
+    shield = shield_with(reviser=ReviserConfig(flags="rate", flag_min_rate=0.1,
+                                                flag_rate_per="recognition"))
     shield.step([0.9], None, event="large_distance", done=True)  # 1 failure, 1 recognition
     assert shield.flags.flags[0] == 2
     for _ in range(9):
