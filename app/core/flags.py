@@ -20,16 +20,23 @@ NO_FLAG = 0
 
 
 class StateFlags:
-    """The flag, the number of recognitions and entries and the failures of every state."""
+    """The flag, the number of recognitions and entries and the failures of every state.
+
+    With ``failure_centres``, a state whose centre is the observation of a failure carries
+    that failure's flag besides the flag of ``mode``, for as long as the centre stays there:
+    such a state is where the failure happened, however often it is passed without one.
+    """
 
     def __init__(self, mode: FlagMode, max_states: int, n_criteria: int,
-                 min_rate: float, rate_per: RatePer) -> None:
+                 min_rate: float, rate_per: RatePer, failure_centres: bool = False) -> None:
         self.mode = mode
         self.max_states = max_states
         self.min_rate = min_rate
         self.rate_per = rate_per
+        self.failure_centres = failure_centres
         self._n = 0
-        self._flags = np.zeros(0, dtype=np.int64)
+        self._flags = np.zeros(0, dtype=np.int64)  # the flags of ``mode`` alone
+        self._centres = np.zeros(0, dtype=np.int64)
         self._visits = np.zeros(0, dtype=np.int64)
         self._entries = np.zeros(0, dtype=np.int64)
         self._failures = np.zeros((0, n_criteria), dtype=np.int64)
@@ -37,8 +44,17 @@ class StateFlags:
 
     @property
     def flags(self) -> npt.NDArray[np.int64]:
-        """Flag of every state (read-only view)."""
-        return _read_only(self._flags[: self._n])
+        """Flag of every state (read-only)."""
+        own = self._flags[: self._n]
+        if not self.failure_centres:
+            return _read_only(own)
+        return _read_only(_first(own, self._centres[: self._n]))
+
+    @property
+    def centres(self) -> npt.NDArray[np.int64]:
+        """Per state, 1 + the criterion of the failure whose observation is its centre, or 0
+        (read-only view; kept whether or not ``failure_centres`` flags by it)."""
+        return _read_only(self._centres[: self._n])
 
     @property
     def visits(self) -> npt.NDArray[np.int64]:
@@ -59,18 +75,28 @@ class StateFlags:
     def flagged(self) -> tuple[IntArray, IntArray]:
         """The flagged states (ascending) and their flags: the reviser reads only these."""
         if self._flagged is None:
-            index = np.flatnonzero(self._flags[: self._n])
-            self._flagged = (index, self._flags[index])
+            flags = self.flags
+            index = np.flatnonzero(flags)
+            self._flagged = (index, flags[index])
         return self._flagged
 
     def add_state(self) -> None:
         """A new state starts favourable and unvisited."""
         n = self._n
         self._flags = ensure_capacity(self._flags, n + 1, self.max_states)
+        self._centres = ensure_capacity(self._centres, n + 1, self.max_states)
         self._visits = ensure_capacity(self._visits, n + 1, self.max_states)
         self._entries = ensure_capacity(self._entries, n + 1, self.max_states)
         self._failures = ensure_capacity(self._failures, n + 1, self.max_states)
         self._n = n + 1
+
+    def place_centre(self, state: int, criterion: int | None) -> None:
+        """The centre of ``state`` is now an observation: of a failure of ``criterion``, or of
+        none."""
+        centre = NO_FLAG if criterion is None else criterion + 1
+        if centre != self._centres[state]:
+            self._centres[state] = centre
+            self._flagged = None
 
     def observe(self, state: int, criterion: int | None, entered: bool) -> None:
         """Count a recognition of ``state`` (an entry too, if ``entered``; and its failure, if
@@ -106,26 +132,39 @@ class StateFlags:
         return int(frequent[0]) + 1 if frequent.size else NO_FLAG
 
     def snapshot(self) -> dict[str, Any]:
-        """Exact state."""
-        return {"flags": self.flags.copy(), "visits": self.visits.copy(),
-                "entries": self.entries.copy(), "failures": self.failures.copy()}
+        """Exact state (``flags``: those of ``mode`` alone)."""
+        return {"flags": self._flags[: self._n].copy(), "centres": self.centres.copy(),
+                "visits": self.visits.copy(), "entries": self.entries.copy(),
+                "failures": self.failures.copy()}
 
     @classmethod
     def restore(cls, mode: FlagMode, max_states: int, n_criteria: int, min_rate: float,
-                rate_per: RatePer, data: dict[str, Any]) -> StateFlags:
+                rate_per: RatePer, failure_centres: bool, data: dict[str, Any]) -> StateFlags:
         """Rebuild from :meth:`snapshot` output. Snapshots from before entries were counted
-        lack them: they count from the restore on."""
-        self = cls(mode, max_states, n_criteria, min_rate, rate_per)
+        lack them, and those from before failure centres were kept lack these: they count
+        from the restore on."""
+        self = cls(mode, max_states, n_criteria, min_rate, rate_per, failure_centres)
         self._flags = np.array(data["flags"], dtype=np.int64).ravel()
         self._visits = np.array(data["visits"], dtype=np.int64).ravel()
         self._n = self._flags.shape[0]
-        entries = data.get("entries")
-        self._entries = (np.zeros(self._n, dtype=np.int64) if entries is None
-                         else np.array(entries, dtype=np.int64).ravel())
+        self._entries = _counts(data.get("entries"), self._n)
+        self._centres = _counts(data.get("centres"), self._n)
         self._failures = np.array(data["failures"], dtype=np.int64).reshape(self._n, n_criteria)
-        if self._visits.shape[0] != self._n or self._entries.shape[0] != self._n:
-            raise ValueError("flags, visits and entries disagree on the state count")
+        sizes = {a.shape[0] for a in (self._visits, self._entries, self._centres)}
+        if sizes != {self._n}:
+            raise ValueError("flags, visits, entries and centres disagree on the state count")
         return self
+
+
+def _counts(data: Any, n: int) -> IntArray:
+    return np.zeros(n, dtype=np.int64) if data is None else np.array(data, dtype=np.int64).ravel()
+
+
+def _first(own: IntArray, centres: IntArray) -> IntArray:
+    """Per state, the flag of higher priority (lower criterion) of two, 0 where both are."""
+    both = np.where(own == NO_FLAG, centres, np.where(centres == NO_FLAG, own,
+                                                     np.minimum(own, centres)))
+    return both.astype(np.int64)
 
 
 def _read_only(view: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:

@@ -131,7 +131,8 @@ class Shield:
         self.clusterer = EvolvingClusterer(cfg.clustering, self._dim, cfg.limits.max_states)
         self.transitions: TransitionModel = self._new_transitions()
         self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria),
-                                cfg.reviser.flag_min_rate, cfg.reviser.flag_rate_per)
+                                cfg.reviser.flag_min_rate, cfg.reviser.flag_rate_per,
+                                cfg.reviser.failure_centres)
         self.streams: dict[str, StreamState] = {}
         self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria})
         self._rng = np.random.default_rng(cfg.reviser.seed)
@@ -288,6 +289,8 @@ class Shield:
             self.flags.add_state()
         elif update.kind == "replaced" and cfg.transitions.on_replace == "reset":
             self.transitions.reset_row(update.index)  # A16
+        if update.kind != "assigned":  # the observation is a centre now
+            self.flags.place_centre(update.index, step.event)
         # Eq. 1 recognition, after clustering
         belief = recognise(update.sq_distances, self.clusterer.variances(),
                            cfg.limits.belief_top_k)
@@ -541,7 +544,7 @@ class Shield:
                                                        limit, tpm)
         self.flags = StateFlags.restore(cfg.reviser.flags, limit, len(cfg.criteria),
                                         cfg.reviser.flag_min_rate, cfg.reviser.flag_rate_per,
-                                        data["flags"])
+                                        cfg.reviser.failure_centres, data["flags"])
         n = self.clusterer.n_states
         if self.transitions.n_states != n or self.flags.flags.shape[0] != n:
             raise InvalidSnapshot("states, matrices and flags disagree on the state count")

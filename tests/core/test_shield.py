@@ -152,9 +152,11 @@ def test_same_seed_same_stream_gives_bit_identical_models_and_decisions() -> Non
     assert pairs_c != pairs_a  # the revision noise comes from the seed
 
 
-def test_snapshot_restore_makes_the_same_decisions() -> None:
-    shield = Shield(cliff_config(activate_after_episodes=5))
+@pytest.mark.parametrize("failure_centres", [False, True])
+def test_snapshot_restore_makes_the_same_decisions(failure_centres: bool) -> None:
+    shield = Shield(cliff_config(activate_after_episodes=5, failure_centres=failure_centres))
     run_cliff(shield, 30, seed=4)
+    assert shield.flags.centres.any()  # the cliff's crashes place centres
     copy = Shield.from_snapshot(shield.snapshot())
     assert_same(copy.snapshot(), shield.snapshot())
     _, original = run_cliff(shield, 30, seed=9)
@@ -182,12 +184,13 @@ def test_a_snapshot_from_before_entries_were_counted_restores_and_counts_on() ->
                                  flag_min_rate=0.002))
     run_cliff(shield, 30, seed=4)
     old = shield.snapshot()
-    del old["flags"]["entries"]
+    del old["flags"]["entries"], old["flags"]["centres"]
     for name in ("flag_rate_per", "flag_min_rate"):  # written before these fields existed
         del old["config"]["reviser"][name]
     copy = Shield.from_snapshot(old)
     assert copy.config == shield.config  # its flags still count recognitions, at 0.002
     assert copy.flags.entries.tolist() == [0] * copy.n_states
+    assert copy.flags.centres.tolist() == [0] * copy.n_states
     _, original = run_cliff(shield, 30, seed=9)
     _, restored = run_cliff(copy, 30, seed=9)
     assert restored == original

@@ -17,6 +17,7 @@ from app.core import (
 )
 from app.core.belief import Belief
 from app.core.clustering import EvolvingClusterer
+from app.core.flags import StateFlags
 from app.core.lazy_tpm import LazyTransitions
 from app.core.reviser import noise_std, predict_ahead
 from tests.utils import cliff_config
@@ -134,6 +135,38 @@ def test_a4_rate_flags_follow_the_share_of_failures_among_recognitions() -> None
     shield.step([0.9], None, event="collision", done=True)
     assert shield.flags.flags[0] == 1  # 2 collisions in 13
     assert shield.state_view(0)["failures"] == {"collision": 2, "large_distance": 1}
+
+
+def test_failure_centres_hold_the_flag_of_a_state_centred_on_a_failure() -> None:
+    """A state that a crash's observation created keeps its flag however often streams come
+    into it without one; counted per entry, the flag lifts."""
+    flags = {}
+    for on in (False, True):
+        shield = shield_with(reviser=ReviserConfig(flag_min_rate=0.1, failure_centres=on))
+        for _ in range(20):  # ordinary driving: state 0
+            shield.step([0.1], 0.0)
+            shield.step([0.2], 0.0)
+        shield.step([0.9], None, event="collision", done=True)  # creates state 1 on the crash
+        for _ in range(20):  # 20 more streams into it, none failing
+            shield.step([0.75], 0.0, done=True)
+        assert shield.n_states == 2 and shield.flags.centres.tolist() == [0, 1]
+        assert shield.state_view(1)["entries"] == 21 and shield.state_view(1)["centre"] == [0.9]
+        flags[on] = shield.flags.flags.tolist()
+    assert flags == {False: [0, 0], True: [0, 1]}  # 1 crash in 21 entries: under 10%
+
+
+def test_failure_centres_give_way_by_priority_and_to_a_moved_centre() -> None:
+    flags = StateFlags("rate", 10, 2, 0.5, "entry", failure_centres=True)
+    flags.add_state()
+    flags.place_centre(0, 1)  # created by a large distance's observation
+    assert flags.flags.tolist() == [2] and flags.flagged()[1].tolist() == [2]
+    flags.observe(0, 0, entered=True)  # a collision: 1 in 1 entry
+    assert flags.flags.tolist() == [1]  # collision comes first
+    flags.observe(0, None, entered=True)
+    flags.observe(0, None, entered=True)  # 1 collision in 3 entries: the counted flag lifts
+    assert flags.flags.tolist() == [2]
+    flags.place_centre(0, None)  # an ordinary observation moved the centre
+    assert flags.flags.tolist() == [0] and flags.flagged()[0].size == 0
 
 
 def test_a4_rate_flags_per_entry_are_not_diluted_by_a_long_stay() -> None:
