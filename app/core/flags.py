@@ -162,9 +162,9 @@ def _counts(data: Any, n: int) -> IntArray:
 
 def _first(own: IntArray, centres: IntArray) -> IntArray:
     """Per state, the flag of higher priority (lower criterion) of two, 0 where both are."""
-    both = np.where(own == NO_FLAG, centres, np.where(centres == NO_FLAG, own,
-                                                     np.minimum(own, centres)))
-    return both.astype(np.int64)
+    either: IntArray = np.where(own == NO_FLAG, centres,
+                                np.where(centres == NO_FLAG, own, np.minimum(own, centres)))
+    return either
 
 
 def _read_only(view: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
