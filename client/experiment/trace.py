@@ -25,6 +25,7 @@ LOOKBACK = 10  # steps before a failure that count as "saw it coming" (2.5 s at 
 EXAMPLES = 2  # failure episodes shown step by step, per failure kind and arm
 REASON_BLOCK = 50  # episodes per row of the table of decisions by reason
 ACTIVE = ("pass", "revised_safety", "revised_speed")  # the reviser was on for this decision
+NEAR = 0.05  # [m/s^2] a revision applied this close to the proposal changed next to nothing
 
 
 def path_for(directory: Path, arm: str, run: int) -> Path:
@@ -72,8 +73,8 @@ def read(path: Path) -> list[dict[str, Any]]:
 
 def analyse(directory: Path) -> str:
     """Markdown, per arm: decisions by reason over the episodes, where the shield revises (by
-    headway), whether it revised before each failure, which states the failures came from, and
-    the last steps of a few failures."""
+    headway), whether it revised before each failure and how far its revisions moved the
+    action, which states the failures came from, and the last steps of a few failures."""
     paths = sorted((directory / "traces").glob("*.jsonl.gz"))
     if not paths:
         raise RecordError(f"{directory}: no traces; run the experiment with --trace")
@@ -100,6 +101,8 @@ def analyse(directory: Path) -> str:
         parts.append(_reasons(episodes))
         parts.append(_by_headway([s for e in active for s in e], criteria))
         parts.append(_before_failures(active, criteria))
+        if not arm.endswith("+shadow"):  # a shadow arm applies the proposals
+            parts.append(_revision_sizes(active, criteria))
         parts.append(_failure_states(episodes, criteria))
         parts.append(_examples(active, criteria))
     return "\n".join(parts)
@@ -156,6 +159,28 @@ def _before_failures(episodes: list[list[dict[str, Any]]], criteria: list[str]) 
         lines.append(f"| {criterion} | {n} | {revised} ({100 * revised / n:.0f}%) | "
                      f"{above} ({100 * above / n:.0f}%) | {peak:.3f} |")
     return "Before each failure:\n\n" + "\n".join(lines) + "\n"
+
+
+def _revision_sizes(episodes: list[list[dict[str, Any]]], criteria: list[str]) -> str:
+    """How far the applied revisions moved the action from the proposal, over all decisions
+    and in the last steps before each failure: the revision noise, cut at the proposal by
+    one-sided revisions, can leave a revision next to the proposal."""
+    lines = ["| revisions against | where | revisions | median of applied - proposed (m/s^2) | "
+             f"applied within {NEAR} m/s^2 of the proposal |", "|---|---|---:|---:|---:|"]
+    for criterion in criteria:
+        tails = [e[-LOOKBACK:] for e in episodes if e[-1]["outcome"] == criterion]
+        for where, steps in (("every step", [s for e in episodes for s in e]),
+                             (f"the last {LOOKBACK} steps before a {criterion}",
+                              [s for t in tails for s in t])):
+            moved = [s["a"] - s["p"] for s in steps
+                     if s["v"] == criterion and s["r"].startswith("revised")]
+            if not moved:
+                continue
+            near = sum(abs(m) <= NEAR for m in moved)
+            lines.append(f"| {criterion} | {where} | {len(moved)} | "
+                         f"{float(np.median(moved)):+.3f} | "
+                         f"{near} ({100 * near / len(moved):.0f}%) |")
+    return "How far the revisions moved the action:\n\n" + "\n".join(lines) + "\n"
 
 
 def _failure_states(episodes: list[list[dict[str, Any]]], criteria: list[str]) -> str:

@@ -666,6 +666,17 @@ def test_the_trace_command_tells_where_the_shield_revised(tmp_path: Path) -> Non
     failed = sum(int(c) for line in origins.splitlines()[2:]
                  for c in line.strip("|").split("|")[3:5])
     assert failed == sum(e.outcome != "success" for e in records.read_all(tmp_path)[1]) > 0
+    sizes = result.stdout.split("How far the revisions moved the action")[1].split("\n\n")[1]
+    overall = {cells[0]: (int(cells[2]), float(cells[3])) for cells in (
+        [c.strip() for c in line.strip("|").split("|")] for line in sizes.splitlines()[2:])
+        if cells[1] == "every step"}
+    for criterion, sign in (("collision", -1), ("large_distance", 1)):  # one-sided revisions
+        revised = [r for r in rows if r["v"] == criterion and r["r"].startswith("revised")]
+        if revised:
+            assert overall[criterion][0] == len(revised)
+            assert all(sign * (r["a"] - r["p"]) >= 0 for r in revised)
+            assert sign * overall[criterion][1] >= 0
+    assert overall  # this run revised
     assert (tmp_path / "trace.md").read_text().strip() == result.stdout.strip()
     missing = cli("trace", str(tmp_path / "elsewhere"))
     assert missing.returncode == 2 and len(missing.stderr.strip().splitlines()) == 1
