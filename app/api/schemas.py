@@ -123,7 +123,8 @@ class ModelCreate(BaseModel):
         "transitions (learning_rate, prior, on_new_state, expansion, action_source, "
         "across_episodes, on_replace), reviser (activate_after_episodes, noise_k, noise, "
         "horizon, transpose, inspect, search, multi_step, flags, flag_min_rate, flag_rate_per, "
-        "failure_centres, one_sided, seed), limits (max_states, belief_top_k, tpm_backend).",
+        "failure_centres, one_sided, noise_side, seed), "
+        "limits (max_states, belief_top_k, tpm_backend).",
         examples=[{"clustering": {"epsilon": 0.1}, "reviser": {"seed": 7}}],
     )
 

@@ -423,9 +423,12 @@ class Shield:
             lambda r: assess(r)[0],
         )
         std = reviser.noise_std(cfg.reviser, self._a_max, self.counters.episodes)
-        revised = actions.decode(final, cfg.action) + float(rng.normal(0.0, std))
-        revised = min(max(revised, cfg.action.low), cfg.action.high)
+        noise = float(rng.normal(0.0, std))
         slower = self._directions[verdict] == "decrease"
+        if cfg.reviser.noise_side == "away":
+            noise = -abs(noise) if slower else abs(noise)
+        revised = actions.decode(final, cfg.action) + noise
+        revised = min(max(revised, cfg.action.low), cfg.action.high)
         if cfg.reviser.one_sided:
             revised = min(revised, proposed) if slower else max(revised, proposed)
         candidates = tuple(

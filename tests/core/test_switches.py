@@ -247,6 +247,32 @@ def test_one_sided_revisions_never_go_past_the_proposal_the_wrong_way(
     assert (applied[True] == proposal).all()
 
 
+@pytest.mark.parametrize("event", ["collision", "large_distance"])
+def test_noise_away_moves_a_revision_only_away_from_the_criterion(event: str) -> None:
+    """The same one-state trap, the proposal in the middle: Alg. 2 ends at the extreme bin
+    (midpoint 1.9 away from the criterion); the paper's noise moves the revision either way
+    around it, ``noise_side="away"`` folds the same draws (the same seed) away from the
+    criterion, where the action's bound cuts them at 0.1."""
+    applied = {}
+    for side in ("both", "away"):
+        shield = shield_with(reviser=ReviserConfig(activate_after_episodes=0, one_sided=False,
+                                                   noise_side=side))  # type: ignore[arg-type]
+        for _ in range(4):
+            shield.step([1.0], None, event=event, done=True)
+        decisions = [shield.step([1.0], 0.0) for _ in range(200)]
+        assert all(d.revised for d in decisions)
+        applied[side] = np.array([d.action for d in decisions])
+    away = -1.0 if event == "collision" else 1.0
+    midpoint = 1.9 * away
+    both, folded = applied["both"], applied["away"]
+    assert ((both - midpoint) * away < -0.1).mean() > 0.3  # back towards the proposal
+    assert ((folded - midpoint) * away >= 0.0).all()
+    drawn = np.abs(both - midpoint) < 3.9 - 1e-9  # not cut by the bound on the far side
+    assert drawn.mean() > 0.9
+    assert np.allclose(np.abs(folded - midpoint)[drawn],
+                       np.minimum(np.abs(both - midpoint), 0.1)[drawn])
+
+
 def test_a8_the_transition_is_learned_under_the_executed_or_the_proposed_action() -> None:
     changed = {}
     for source in ("executed", "proposed"):
