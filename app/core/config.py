@@ -211,8 +211,8 @@ class ReviserConfig:
     # takes a revision back towards the proposal. Why: one-sided revisions cut the noise at the
     # proposal, and a step trace of today's default on tuning seed 4 found 32% of the
     # revisions against a collision, and 44% in the ten steps before one, applied within
-    # 0.05 m/s^2 of the proposal (results/README.md, "The revision noise under one-sided
-    # revisions")
+    # 0.05 m/s^2 of the proposal. Off: ahead on tuning seed 4, behind on seed 5
+    # (results/README.md, "The revision noise folded away from the criterion")
     noise_side: Literal["both", "away"] = "both"
     seed: int = 0
 
