@@ -4,7 +4,8 @@
 * one DDPG update (batch 64, the configured networks), single-threaded torch;
 * the wall time of the same shielded DDPG training (seed 0, the reviser active from the start
   so every step is inspected) in-process and over WebSocket, HTTP and the batch route of a
-  shield service in its own process, as ratios to in-process;
+  shield service in its own process, as ratios to in-process, in the usual order (update
+  after the step) and with ``update_first`` (the update runs while the service answers);
 * 10 DDPG runs (in-process shields) trained one after the other against the same 10 runs in
   lockstep with one vectorised update.
 
@@ -34,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from app.core import ShieldConfig  # noqa: E402
 from client.__main__ import service  # noqa: E402
 from client.agents.ddpg import DDPG, DDPGConfig  # noqa: E402
-from client.experiment.runner import play  # noqa: E402
+from client.experiment.runner import overlap_pool, play  # noqa: E402
 from client.shield import (  # noqa: E402
     BatchShield,
     LocalShield,
@@ -88,22 +89,27 @@ def ensemble_update_ms(members: int) -> float:
     return update_ms(ensemble, ensemble.members, 200)
 
 
-def training(shield: StepShield, episodes: int) -> tuple[float, int]:
-    """Seconds and steps of a shielded DDPG training."""
+def training(shield: StepShield, episodes: int, update_first: bool) -> tuple[float, int]:
+    """Seconds and steps of a shielded DDPG training (``update_first``: the learner updates
+    while a remote shield answers)."""
     env = ShieldWrapper(CarFollowingEnv(lead=lead.cmap("train")), shield)
-    agent = DDPG(DDPGConfig(warmup=256), 0)
+    agent = DDPG(DDPGConfig(warmup=256, update_first=update_first), 0)
+    pool = overlap_pool(agent, [shield])
     obs, _ = env.reset(seed=0)
     steps = 0
     start = time.perf_counter()
     for _ in range(episodes):
-        measured, obs = play(env, agent, obs, agent)
+        measured, obs = play(env, agent, obs, agent, pool=pool)
         steps += measured["steps"]
         obs, _ = env.reset()
-    return time.perf_counter() - start, steps
+    seconds = time.perf_counter() - start
+    if pool is not None:
+        pool.shutdown()
+    return seconds, steps
 
 
 def lockstep_against_separate(runs: int, episodes: int, url: str = "local",
-                              ) -> tuple[float, float]:
+                              update_first: bool = False) -> tuple[float, float]:
     """Seconds for ``runs`` x ``episodes`` of ddpg+shield, one run after another and in
     lockstep; with a service ``url``, separate runs use WebSocket and lockstep the batch
     route (one request per step for every run)."""
@@ -111,7 +117,8 @@ def lockstep_against_separate(runs: int, episodes: int, url: str = "local",
     from client.experiment.runner import ExperimentConfig, run_one
 
     config = ExperimentConfig(arms=("ddpg+shield",), runs=runs, episodes=episodes, seed=0,
-                              ddpg={"warmup": 256}, shield=url, transport="ws",
+                              ddpg={"warmup": 256, "update_first": update_first}, shield=url,
+                              transport="ws",
                               shield_config={"reviser": {"activate_after_episodes": 0}})
     with tempfile.TemporaryDirectory() as separate, tempfile.TemporaryDirectory() as together:
         start = time.perf_counter()
@@ -135,29 +142,31 @@ def main() -> None:
     sim = statistics.median(simulator_steps_per_second() for _ in range(args.rounds))
     update = statistics.median(ddpg_update_ms() for _ in range(args.rounds))
     ensemble = statistics.median(ensemble_update_ms(10) for _ in range(args.rounds))
-    times: dict[str, list[float]] = {"in-process": [], "ws": [], "http": [], "batch": []}
-    steps: dict[str, int] = {}
+    orders = {"usual": False, "update first": True}
+    times: dict[tuple[str, str], list[float]] = {}
+    steps: dict[tuple[str, str], int] = {}
     with tempfile.TemporaryDirectory() as data, service(Path(data) / "shield") as url:
         for r in range(args.rounds):
-            with ShieldClient(url) as admin:
-                for t in ("ws", "http", "batch"):
-                    name = f"bench-{t}-{r}"
-                    admin.create_model(name, SHIELD)
-            shields: dict[str, StepShield] = {
-                "in-process": LocalShield(ShieldConfig.from_dict(SHIELD)),
-                "ws": ShieldSession(url, model=f"bench-ws-{r}"),
-                "http": ShieldClient(url, model=f"bench-http-{r}"),
-                "batch": BatchShield(url, model=f"bench-batch-{r}"),
-            }
-            for name, shield in shields.items():
-                seconds, n = training(shield, args.episodes)
-                shield.close()
-                times[name].append(seconds)
-                steps[name] = n
-        remote = [lockstep_against_separate(10, 3, url) for _ in range(args.rounds)]
+            for order, first in orders.items():
+                tag = f"{r}-{int(first)}"
+                with ShieldClient(url) as admin:
+                    for t in ("ws", "http", "batch"):
+                        admin.create_model(f"bench-{t}-{tag}", SHIELD)
+                shields: dict[str, StepShield] = {
+                    "in-process": LocalShield(ShieldConfig.from_dict(SHIELD)),
+                    "ws": ShieldSession(url, model=f"bench-ws-{tag}"),
+                    "http": ShieldClient(url, model=f"bench-http-{tag}"),
+                    "batch": BatchShield(url, model=f"bench-batch-{tag}"),
+                }
+                for name, shield in shields.items():
+                    seconds, n = training(shield, args.episodes, first)
+                    shield.close()
+                    times.setdefault((order, name), []).append(seconds)
+                    steps[order, name] = n
+        remote = {order: [lockstep_against_separate(10, 3, url, first)
+                          for _ in range(args.rounds)] for order, first in orders.items()}
     separate, together = zip(*(lockstep_against_separate(10, 3) for _ in range(args.rounds)),
                              strict=True)
-    base = statistics.median(times["in-process"])
     results: dict[str, Any] = {"simulator_steps_per_s": sim, "ddpg_update_ms": update,
                                "ensemble_update_ms_10": ensemble, "training": {}}
     print(f"\nseed 0; {args.rounds} rounds; {args.episodes} training episodes each; "
@@ -167,23 +176,27 @@ def main() -> None:
     print(f"DDPG update (batch 64, 64x64 networks): {update:.2f} ms")
     print(f"one vectorised update of 10 learners: {ensemble:.2f} ms "
           f"({10 * update / ensemble:.1f}x faster than 10 updates)\n")
-    print("| shield reached | training wall time (s) | steps | vs in-process |")
-    print("|---|---:|---:|---:|")
-    for name, values in times.items():
+    print("| order | shield reached | training wall time (s) | steps | vs in-process, same order |")
+    print("|---|---|---:|---:|---:|")
+    for (order, name), values in times.items():
         median = statistics.median(values)
-        results["training"][name] = {"seconds": median, "steps": steps[name],
-                                     "ratio": median / base}
-        print(f"| {name} | {median:.1f} | {steps[name]} | {median / base:.2f}x |")
+        base = statistics.median(times[order, "in-process"])
+        results["training"][f"{order}: {name}"] = {"seconds": median, "steps": steps[order, name],
+                                                   "ratio": median / base}
+        print(f"| {order} | {name} | {median:.1f} | {steps[order, name]} | {median / base:.2f}x |")
     one_by_one, lockstep = statistics.median(separate), statistics.median(together)
     results["lockstep"] = {"runs": 10, "episodes": 3, "separate_s": one_by_one,
                            "lockstep_s": lockstep}
     print(f"\n10 runs x 3 episodes of ddpg+shield (in-process shields): one after another "
           f"{one_by_one:.1f} s, lockstep {lockstep:.1f} s (ratio {one_by_one / lockstep:.2f})")
-    ws_runs, batch_lockstep = (statistics.median(x) for x in zip(*remote, strict=True))
-    results["lockstep_remote"] = {"separate_ws_s": ws_runs, "lockstep_batch_s": batch_lockstep}
-    print(f"the same against the service: one after another over WebSocket {ws_runs:.1f} s, "
-          f"lockstep over the batch route {batch_lockstep:.1f} s "
-          f"(ratio {ws_runs / batch_lockstep:.2f})")
+    results["lockstep_remote"] = {}
+    for order, pairs in remote.items():
+        ws_runs, batch_lockstep = (statistics.median(x) for x in zip(*pairs, strict=True))
+        results["lockstep_remote"][order] = {"separate_ws_s": ws_runs,
+                                             "lockstep_batch_s": batch_lockstep}
+        print(f"the same against the service, {order}: one after another over WebSocket "
+              f"{ws_runs:.1f} s, lockstep over the batch route {batch_lockstep:.1f} s "
+              f"(ratio {ws_runs / batch_lockstep:.2f})")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
 

@@ -39,7 +39,7 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
                out: Path, workers: int, token: str | None, lead: str,
                shield_config: str = "{}", lockstep: int = 0, trace: bool = False,
                device: str = "cpu", checkpoint_every: float | None = None,
-               deadline: float | None = None) -> str:
+               deadline: float | None = None, update_first: bool = False) -> str:
     """Run, then report (or, stopped at ``deadline``, say how to go on); every failure a user
     can cause becomes one line."""
     try:
@@ -48,7 +48,8 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
         config = runner.ExperimentConfig(
             arms=tuple(a.strip() for a in arms.split(",") if a.strip()), runs=runs,
             episodes=episodes, seed=seed, shield=shield, transport=transport,  # type: ignore[arg-type]
-            lead=lead, shield_config=overrides)  # type: ignore[arg-type]
+            lead=lead, shield_config=overrides,  # type: ignore[arg-type]
+            ddpg={"update_first": True} if update_first else {})
         if shield != "local":
             for url in config.shield_urls:
                 with contextlib.closing(ShieldClient(url, token=token)) as probe:
@@ -113,6 +114,10 @@ def run(
     stop_after: Annotated[float | None, typer.Option(
         min=0, help="Stop after this many minutes: lockstep groups save their state, other "
                     "runs finish their episode; the same command goes on from there.")] = None,
+    update_first: Annotated[bool, typer.Option(
+        help="DDPG updates before each step instead of after it, so that it learns while a "
+             "shield service answers: faster over the network, the same records over every "
+             "transport, not those of the usual order.")] = False,
 ) -> None:
     """Run arms x runs x episodes (resumable: run it again to continue), then report."""
     if not lockstep and (lockstep_runs is not None or device != "cpu"
@@ -132,7 +137,8 @@ def run(
     every = 60.0 * minutes if lockstep and minutes and not trace else None
     deadline = None if stop_after is None else time.time() + 60.0 * stop_after
     typer.echo(experiment(arms, runs, episodes, seed, shield, transport, out, workers, token,
-                          lead, shield_config, group, trace, device, every, deadline))
+                          lead, shield_config, group, trace, device, every, deadline,
+                          update_first))
     if (out / "table.md").exists() and not checkpoint.pending(out):
         typer.echo(f"\nrecords, summary.json, table.md and figure.png in {out}")
 

@@ -37,6 +37,12 @@ class DDPGConfig:
     ou_theta: float = 0.15  # [REC]
     ou_sigma: float = 0.2  # [REC]
     warmup: int = 1000  # transitions stored before the first update
+    # Not in the paper: each step's update runs before the step instead of after it, so it
+    # draws its batch from the transitions stored so far, without the step's own (the next
+    # update can draw it). What it buys: the update no longer waits for the shield's answer,
+    # so the client runs it while a shield service computes the step (BENCHMARKS.md). Off:
+    # the usual order, which every experiment recorded before it used
+    update_first: bool = False
 
 
 class ReplaySample(NamedTuple):

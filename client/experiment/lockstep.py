@@ -21,8 +21,10 @@ from client.experiment.runner import (
     Run,
     model_name,
     model_state,
+    overlap_pool,
     parse_arm,
     torch_for_one_core,
+    while_updating,
 )
 from client.shield import BatchShield, ShieldSession
 from client.shield.remote import step_body
@@ -68,7 +70,8 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
     on ``device``), and one round of shield requests per step: with the batch transport one
     request carrying a step of every run's model, over WebSocket every run's step sent before
     any reply is read. Each run sees the same sequence as :func:`run_one` (act, shield, step,
-    remember, update); results agree within the rounding of batched arithmetic.
+    remember, update; with ``update_first`` the update comes while the shields answer);
+    results agree within the rounding of batched arithmetic.
 
     The group saves a checkpoint every ``checkpoint_every`` seconds, and when ``stop`` (asked
     after every step) says to stop, before returning; a group with a checkpoint continues from
@@ -113,6 +116,11 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
         places = [Place.restore(r, saved["places"][r.index]) for r in runs]
         learner.restore(saved["learner"])
     active = list(range(len(runs)))
+    first = learner.config.update_first
+    pool = overlap_pool(learner, [r.shield for r in runs])
+
+    def decide(active: list[int], z: list[Any], proposals: list[float]) -> list[Any]:
+        return shield.decide(active, z, proposals) if shield else [None] * len(active)
 
     def save() -> None:
         if shield:
@@ -128,8 +136,11 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
             for k, a in zip(active, learner.act(np.stack([places[k].obs for k in active])),
                             strict=True):
                 proposals[k] = a
-            decisions = shield.decide(active, [p.z for p in places], proposals) \
-                if shield else [None] * len(active)
+            observed = [p.z for p in places]
+            if first:
+                decisions = while_updating(learner, pool, decide, active, observed, proposals)
+            else:
+                decisions = decide(active, observed, proposals)
             going = list(active)
             for j, (k, decision) in enumerate(zip(list(active), decisions, strict=True)):
                 place = places[k]
@@ -159,7 +170,8 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
                     place.z = reset_info["efsm_observation"]
                     place.meter, place.started = EpisodeMeter(), time.perf_counter()
                     learner.members[j].noise.reset()
-            learner.update()
+            if not first:
+                learner.update()
             if len(going) < len(active):  # finished runs learn no more: drop their learners
                 if going:
                     learner.keep([active.index(k) for k in going])
@@ -177,6 +189,8 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
         if not active:
             checkpoint.remove(saved_at)
     finally:
+        if pool is not None:
+            pool.shutdown()
         for r in runs:
             r.close()
     return sum(r.appended for r in runs)

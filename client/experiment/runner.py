@@ -15,10 +15,11 @@ import json
 import platform
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any, Literal, Protocol
+from typing import IO, Any, Literal, Protocol, TypeVar
 
 import numpy as np
 
@@ -33,6 +34,8 @@ from client.shield import BatchShield, LocalShield, ShieldClient, ShieldSession,
 from client.shield.wrapper import ShieldWrapper
 from client.sim import lead
 from client.sim.car_following import CarFollowingEnv, RewardConfig
+
+T = TypeVar("T")
 
 CONTROLLERS = ("ddpg", "idm", "idm-aggressive", "random")
 MODES = ("shield", "shadow")
@@ -229,26 +232,55 @@ class EpisodeMeter:
 
 
 def play(env: Any, agent: Controller, obs: Any, learner: Any | None,
-         trace: Callable[[float, dict[str, Any]], None] | None = None) -> tuple[
-        dict[str, Any], Any]:
+         trace: Callable[[float, dict[str, Any]], None] | None = None,
+         pool: Executor | None = None) -> tuple[dict[str, Any], Any]:
     """One episode; returns its measurements and the last observation. ``trace`` sees each
-    step's proposal and info."""
+    step's proposal and info. A learner that updates first (``update_first``) updates
+    while ``pool``, if given, steps the environment and its shield."""
     meter = EpisodeMeter()
     info: dict[str, Any] = {}
+    first = learner is not None and learner.config.update_first
     for _ in range(800):
         proposed = agent.act(obs)
-        next_obs, reward, terminated, truncated, info = env.step(
-            np.array([proposed], np.float32))
+        action = np.array([proposed], np.float32)
+        if first:
+            next_obs, reward, terminated, truncated, info = while_updating(
+                learner, pool, env.step, action)
+        else:
+            next_obs, reward, terminated, truncated, info = env.step(action)
         if trace is not None:
             trace(proposed, info)
         executed = meter.add(proposed, reward, info)
         if learner is not None:
             learner.remember(obs, executed, reward, next_obs, terminated)
-            learner.update()
+            if not first:
+                learner.update()
         obs = next_obs
         if terminated or truncated:
             break
     return meter.result(info), obs
+
+
+def while_updating(learner: Any, pool: Executor | None, work: Callable[..., T],
+                   *args: Any) -> T:
+    """``work(*args)`` and one update of ``learner``: at once where ``pool`` runs the work
+    (a remote shield's answer is mostly waiting), else the update first. Both orders give the
+    same result: the work does not touch the learner."""
+    if pool is None:
+        learner.update()
+        return work(*args)
+    pending = pool.submit(work, *args)
+    learner.update()
+    return pending.result()
+
+
+def overlap_pool(learner: Any, shields: Sequence[StepShield | None]) -> Executor | None:
+    """A thread to step remote shields in while a learner that updates first updates; none
+    where there is nothing to wait for (no learner, the usual order, in-process shields)."""
+    remote = any(s is not None and not isinstance(s, LocalShield) for s in shields)
+    if learner is None or not learner.config.update_first or not remote:
+        return None
+    return ThreadPoolExecutor(1, thread_name_prefix="shield")
 
 
 @dataclass
@@ -378,17 +410,20 @@ def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str 
     else:
         agent = PRESETS["aggressive" if controller == "idm-aggressive" else "normal"]
     obs, _ = state.env.reset(seed=state.seed)
+    pool = overlap_pool(learner, [state.shield])
     try:
         for episode in range(1, config.episodes + 1):
             start = time.perf_counter()
             if learner is not None:
                 learner.noise.reset()
-            measured, obs = play(state.env, agent, obs, learner, state.recorder(episode))
+            measured, obs = play(state.env, agent, obs, learner, state.recorder(episode), pool)
             state.finish(episode, measured, time.perf_counter() - start, progress)
             if stop is not None and stop():
                 break
             obs, _ = state.env.reset()
         state.keep_model()
     finally:
+        if pool is not None:
+            pool.shutdown()
         state.close()
     return state.appended

@@ -56,15 +56,18 @@ def episodes(directory: Path, run: int) -> list[records.EpisodeRecord]:
     return records.read(records.path_for(directory, "ddpg+shield", run))[1]
 
 
-def test_lockstep_runs_record_what_separate_runs_record(tmp_path: Path) -> None:
+@pytest.mark.parametrize("update_first", [False, True])
+def test_lockstep_runs_record_what_separate_runs_record(tmp_path: Path,
+                                                        update_first: bool) -> None:
     """Batched products round differently (about 1e-7 per action), and the shield's discrete
     choices (a new state or not, a bin edge) can turn that into a different episode once it
     acts. So: the episodes before the reviser switches on agree exactly, and every run's
-    record is complete."""
+    record is complete; in either order of update and step."""
+    config = dataclasses.replace(CONFIG, ddpg={**CONFIG.ddpg, "update_first": update_first})
     separate, lockstep = tmp_path / "separate", tmp_path / "lockstep"
     for run in range(CONFIG.runs):
-        runner.run_one(CONFIG, "ddpg+shield", run, separate)
-    assert run_lockstep(CONFIG, "ddpg+shield", lockstep) == CONFIG.runs * CONFIG.episodes
+        runner.run_one(config, "ddpg+shield", run, separate)
+    assert run_lockstep(config, "ddpg+shield", lockstep) == CONFIG.runs * CONFIG.episodes
     before = CONFIG.shield_config["reviser"]["activate_after_episodes"]
     for run in range(CONFIG.runs):
         a, b = episodes(separate, run), episodes(lockstep, run)
@@ -74,8 +77,8 @@ def test_lockstep_runs_record_what_separate_runs_record(tmp_path: Path) -> None:
         assert [r.episode_return for r in b[:before]] == pytest.approx(
             [r.episode_return for r in a[:before]], rel=1e-4)
     # and a lockstep experiment resumes like any other
-    assert run_lockstep(CONFIG, "ddpg+shield", lockstep) == 0
-    bigger = dataclasses.replace(CONFIG, episodes=6)
+    assert run_lockstep(config, "ddpg+shield", lockstep) == 0
+    bigger = dataclasses.replace(config, episodes=6)
     with pytest.raises(records.RecordError):
         run_lockstep(bigger, "ddpg+shield", lockstep)  # another configuration
 
@@ -85,20 +88,23 @@ def test_lockstep_is_for_ddpg_arms(tmp_path: Path) -> None:
         run_lockstep(dataclasses.replace(CONFIG, arms=("idm",)), "idm", tmp_path)
 
 
-@pytest.mark.parametrize("transport", ["batch", "ws"])
-def test_lockstep_against_a_service_equals_lockstep_in_process(tmp_path: Path,
-                                                               transport: str) -> None:
+@pytest.mark.parametrize(("transport", "update_first"),
+                         [("batch", False), ("ws", False), ("batch", True)])
+def test_lockstep_against_a_service_equals_lockstep_in_process(
+        tmp_path: Path, transport: str, update_first: bool) -> None:
     """One round per lockstep step (over the batch route one request carrying a step of every
     run's model; over WebSocket every run's frame sent before any reply is read): each model
     still sees its own steps in order and the learner's arithmetic is the in-process one, so
-    the records are identical."""
+    the records are identical; with ``update_first`` too, where the batched update runs
+    while the service answers."""
     from tests.conftest import start_server
 
     server = start_server(tmp_path / "data", "--fsync", "never")
     try:
-        remote = dataclasses.replace(CONFIG, shield=server.url, transport=transport)
+        config = dataclasses.replace(CONFIG, ddpg={**CONFIG.ddpg, "update_first": update_first})
+        remote = dataclasses.replace(config, shield=server.url, transport=transport)
         local_dir, remote_dir = tmp_path / "local", tmp_path / "remote"
-        run_lockstep(CONFIG, "ddpg+shield", local_dir)
+        run_lockstep(config, "ddpg+shield", local_dir)
         run_lockstep(remote, "ddpg+shield", remote_dir)
         for run in range(CONFIG.runs):
             a = [dataclasses.replace(r, wall_s=0.0) for r in episodes(local_dir, run)]

@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -201,6 +202,59 @@ def test_ddpg_is_deterministic_for_a_seed() -> None:
     assert train(1) != train(2)
 
 
+class Sequenced:
+    """A learner, a controller and an environment in one, writing down what happens in which
+    order. The update and the step each wait (2 s at most) for the other to have started:
+    only a step run beside the update lets both see it."""
+
+    def __init__(self, update_first: bool) -> None:
+        self.config = DDPGConfig(update_first=update_first)
+        self.calls: list[str] = []
+        self.updating, self.stepping = threading.Event(), threading.Event()
+        self.met: list[bool] = []
+
+    def act(self, obs: object) -> float:
+        self.calls.append("act")
+        return 0.0
+
+    def update(self) -> None:
+        self.updating.set()
+        self.met.append(self.stepping.wait(2))
+        self.calls.append("update")
+
+    def step(self, action: object) -> tuple[object, float, bool, bool, dict[str, object]]:
+        self.stepping.set()
+        self.met.append(self.updating.wait(2))
+        self.calls.append("step")
+        return np.zeros(4, np.float32), 0.0, True, False, {"speed_difference": 0.0}
+
+    def remember(self, *transition: object) -> None:
+        self.calls.append("remember")
+
+
+@pytest.mark.parametrize("update_first", [False, True])
+def test_a_learner_that_updates_first_updates_while_the_shield_answers(
+        update_first: bool) -> None:
+    """The usual order updates after storing the step; ``update_first`` updates before the
+    step is stored, and, given a thread to step the environment in (a remote shield's), both
+    at once."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    alone = Sequenced(update_first)
+    runner.play(alone, alone, np.zeros(4, np.float32), alone)  # type: ignore[arg-type]
+    expected = ["act", "update", "step", "remember"] if update_first else \
+        ["act", "step", "remember", "update"]
+    assert alone.calls == expected
+    assert alone.met == [False, True]  # one after the other: the first waited in vain
+    if update_first:
+        beside = Sequenced(update_first)
+        with ThreadPoolExecutor(1) as pool:
+            runner.play(beside, beside, np.zeros(4, np.float32), beside,  # type: ignore[arg-type]
+                        pool=pool)
+        assert beside.met == [True, True]  # each saw the other start: they ran together
+        assert beside.calls[-1] == "remember"
+
+
 def test_gzipped_records_report_the_same(tmp_path: Path) -> None:
     """Committed results keep their records gzipped; the report reads them unchanged."""
     plain, packed = tmp_path / "plain", tmp_path / "packed"
@@ -381,6 +435,15 @@ def test_lockstep_command(tmp_path: Path) -> None:
                  "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
     assert "| ddpg | 3 | 6 |" in result.stdout and "| idm | 3 | 6 |" in result.stdout
+
+
+def test_the_run_command_can_have_ddpg_update_first(tmp_path: Path) -> None:
+    result = cli("run", "--arms", "ddpg", "--runs", "1", "--episodes", "1", "--lead",
+                 "synthetic", "--update-first", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    header = json.loads((tmp_path / "records" / "ddpg__run00.jsonl").read_text()
+                        .splitlines()[0])["header"]
+    assert header["config"]["ddpg"] == {"update_first": True}
 
 
 def test_the_demo_trains_both_arms_in_lockstep_against_its_own_service(tmp_path: Path) -> None:

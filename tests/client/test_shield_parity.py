@@ -103,6 +103,36 @@ def test_runner_records_are_identical_in_process_and_over_the_network(
     assert sum(sum(r.interventions.values()) for r in episodes(local_dir)) > 0  # type: ignore[attr-defined]
 
 
+def test_ddpg_that_updates_first_records_the_same_in_process_and_over_the_network(
+    server: Server, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    """With ``update_first`` the learner updates while a remote shield answers (in a second
+    thread), and learns what it learns in process: the records agree over every transport,
+    and they are not those of the usual order (the option changes the learning)."""
+    import dataclasses
+
+    from client.experiment import records, runner
+
+    config = runner.ExperimentConfig(
+        arms=("ddpg+shield",), runs=1, episodes=3, seed=23, lead="synthetic",
+        ddpg={"warmup": 64, "update_first": True},
+        shield_config={"reviser": {"activate_after_episodes": 1}}, model_prefix="first")
+
+    def episodes(config: runner.ExperimentConfig) -> list[object]:
+        out = tmp_path_factory.mktemp(config.transport)
+        runner.run_one(config, config.arms[0], 0, out)
+        return [dataclasses.replace(r, wall_s=0.0)
+                for r in records.read(records.path_for(out, config.arms[0], 0))[1]]
+
+    local = episodes(config)
+    for transport in ("http", "ws", "batch"):
+        remote = dataclasses.replace(config, shield=server.url, transport=transport)  # type: ignore[arg-type]
+        assert episodes(remote) == local, transport
+    assert sum(sum(r.interventions.values()) for r in local) > 0  # type: ignore[attr-defined]
+    usual = episodes(dataclasses.replace(config, ddpg={"warmup": 64}))
+    assert [r.episode_return for r in usual] != [r.episode_return for r in local]  # type: ignore[attr-defined]
+
+
 def test_runs_spread_over_sidecars_keep_their_records(
     server: Server, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
