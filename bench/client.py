@@ -6,8 +6,9 @@
   so every step is inspected) in-process and over WebSocket, HTTP and the batch route of a
   shield service in its own process, as ratios to in-process, in the usual order (update
   after the step) and with ``update_first`` (the update runs while the service answers);
-* 10 DDPG runs (in-process shields) trained one after the other against the same 10 runs in
-  lockstep with one vectorised update.
+* 10 DDPG runs trained one after the other against the same 10 runs in lockstep with one
+  vectorised update: with in-process shields, and against the service (one after the other
+  over WebSocket, lockstep over the batch route) in both orders, with the steps they took.
 
 Medians over rounds.
 
@@ -109,12 +110,19 @@ def training(shield: StepShield, episodes: int, update_first: bool) -> tuple[flo
 
 
 def lockstep_against_separate(runs: int, episodes: int, url: str = "local",
-                              update_first: bool = False) -> tuple[float, float]:
+                              update_first: bool = False) -> dict[str, float]:
     """Seconds for ``runs`` x ``episodes`` of ddpg+shield, one run after another and in
-    lockstep; with a service ``url``, separate runs use WebSocket and lockstep the batch
-    route (one request per step for every run)."""
+    lockstep, with their steps (all runs' one after another; the longest run's in lockstep,
+    one step of every run each); with a service ``url``, separate runs use WebSocket and
+    lockstep the batch route (one request per step for every run)."""
+    from client.experiment import records
     from client.experiment.lockstep import run_lockstep
     from client.experiment.runner import ExperimentConfig, run_one
+
+    def steps(out: str) -> list[int]:
+        return [sum(r.steps for r in records.read(records.path_for(Path(out), "ddpg+shield",
+                                                                    run))[1])
+                for run in range(runs)]
 
     config = ExperimentConfig(arms=("ddpg+shield",), runs=runs, episodes=episodes, seed=0,
                               ddpg={"warmup": 256, "update_first": update_first}, shield=url,
@@ -128,7 +136,8 @@ def lockstep_against_separate(runs: int, episodes: int, url: str = "local",
         start = time.perf_counter()
         run_lockstep(dataclasses.replace(config, transport="batch"), "ddpg+shield",
                      Path(together))
-        return one_by_one, time.perf_counter() - start
+        return {"separate_s": one_by_one, "lockstep_s": time.perf_counter() - start,
+                "separate_steps": sum(steps(separate)), "lockstep_steps": max(steps(together))}
 
 
 def main() -> None:
@@ -165,8 +174,7 @@ def main() -> None:
                     steps[order, name] = n
         remote = {order: [lockstep_against_separate(10, 3, url, first)
                           for _ in range(args.rounds)] for order, first in orders.items()}
-    separate, together = zip(*(lockstep_against_separate(10, 3) for _ in range(args.rounds)),
-                             strict=True)
+    local = [lockstep_against_separate(10, 3) for _ in range(args.rounds)]
     results: dict[str, Any] = {"simulator_steps_per_s": sim, "ddpg_update_ms": update,
                                "ensemble_update_ms_10": ensemble, "training": {}}
     print(f"\nseed 0; {args.rounds} rounds; {args.episodes} training episodes each; "
@@ -184,19 +192,21 @@ def main() -> None:
         results["training"][f"{order}: {name}"] = {"seconds": median, "steps": steps[order, name],
                                                    "ratio": median / base}
         print(f"| {order} | {name} | {median:.1f} | {steps[order, name]} | {median / base:.2f}x |")
-    one_by_one, lockstep = statistics.median(separate), statistics.median(together)
-    results["lockstep"] = {"runs": 10, "episodes": 3, "separate_s": one_by_one,
-                           "lockstep_s": lockstep}
-    print(f"\n10 runs x 3 episodes of ddpg+shield (in-process shields): one after another "
-          f"{one_by_one:.1f} s, lockstep {lockstep:.1f} s (ratio {one_by_one / lockstep:.2f})")
-    results["lockstep_remote"] = {}
-    for order, pairs in remote.items():
-        ws_runs, batch_lockstep = (statistics.median(x) for x in zip(*pairs, strict=True))
-        results["lockstep_remote"][order] = {"separate_ws_s": ws_runs,
-                                             "lockstep_batch_s": batch_lockstep}
-        print(f"the same against the service, {order}: one after another over WebSocket "
-              f"{ws_runs:.1f} s, lockstep over the batch route {batch_lockstep:.1f} s "
-              f"(ratio {ws_runs / batch_lockstep:.2f})")
+    print("\n10 runs x 3 episodes of ddpg+shield, one after another (WebSocket against the "
+          "service) and in lockstep (the batch route):\n")
+    print("| shield | order | one after another (s) | ms a step | lockstep (s) "
+          "| ms a lockstep step | speed-up |")
+    print("|---|---|---:|---:|---:|---:|---:|")
+    results["lockstep"] = {}
+    for label, rows in [("in-process, usual", local),
+                        *((f"service, {order}", rows) for order, rows in remote.items())]:
+        m = {key: statistics.median(r[key] for r in rows) for key in rows[0]}
+        results["lockstep"][label] = m
+        where, order = label.split(", ")
+        print(f"| {where} | {order} | {m['separate_s']:.1f} "
+              f"| {1e3 * m['separate_s'] / m['separate_steps']:.2f} | {m['lockstep_s']:.1f} "
+              f"| {1e3 * m['lockstep_s'] / m['lockstep_steps']:.2f} "
+              f"| {m['separate_s'] / m['lockstep_s']:.2f}x |")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
 

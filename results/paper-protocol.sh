@@ -39,6 +39,9 @@
 #                  --shield-config), e.g. '{"reviser": {"flags": "sticky"}}'; give OUT a
 #                  folder of its own
 #   LOG_LEVEL=L    the services' log level (default warning; info logs every request)
+#   UPDATE_FIRST=1 DDPG updates before each step, while the shield service answers (client run
+#                  --update-first): faster against a service, but not the usual order's
+#                  results; give OUT a folder of its own
 #
 # The two arms run as two `client run` commands side by side, so their groups can differ. On
 # 2 cores, LOCKSTEP=1 GROUP=10 TRANSPORT=batch: two shielded groups of 5 overlap one group's
@@ -109,6 +112,7 @@ fi
     fi
     echo "runs: $runs x $episodes episodes per arm; $how; $services shield service(s), $transport"
     echo "shield overrides: ${SHIELD_CONFIG:-{\}}"
+    [ -z "${UPDATE_FIRST:-}" ] || echo "ddpg: update first"
 } >>"$out/machine.txt"
 start=$(date +%s)
 arms=()
@@ -117,7 +121,8 @@ for arm in ${ARMS:-ddpg ddpg+shield}; do
     # shellcheck disable=SC2046  # the options are words
     "$PYTHON" -m client run --arms "$arm" --runs "$runs" --episodes "$episodes" --seed 1000 \
         --shield "$(IFS=,; echo "${urls[*]}")" --transport "$transport" \
-        --shield-config "${SHIELD_CONFIG:-{\}}" $(arm_options "$size") --out "$out" &
+        --shield-config "${SHIELD_CONFIG:-{\}}" $(arm_options "$size") \
+        ${UPDATE_FIRST:+--update-first} --out "$out" &
     arms+=($!)
     pids+=($!)  # stopping the script stops the arms too
 done
