@@ -174,7 +174,8 @@ def main() -> None:
                     steps[order, name] = n
         remote = {order: [lockstep_against_separate(10, 3, url, first)
                           for _ in range(args.rounds)] for order, first in orders.items()}
-    local = [lockstep_against_separate(10, 3) for _ in range(args.rounds)]
+    local = {order: [lockstep_against_separate(10, 3, "local", first)
+                     for _ in range(args.rounds)] for order, first in orders.items()}
     results: dict[str, Any] = {"simulator_steps_per_s": sim, "ddpg_update_ms": update,
                                "ensemble_update_ms_10": ensemble, "training": {}}
     print(f"\nseed 0; {args.rounds} rounds; {args.episodes} training episodes each; "
@@ -194,19 +195,19 @@ def main() -> None:
         print(f"| {order} | {name} | {median:.1f} | {steps[order, name]} | {median / base:.2f}x |")
     print("\n10 runs x 3 episodes of ddpg+shield, one after another (WebSocket against the "
           "service) and in lockstep (the batch route):\n")
-    print("| shield | order | one after another (s) | ms a step | lockstep (s) "
-          "| ms a lockstep step | speed-up |")
+    print("| order | shield | one after another (s) | ms a step | lockstep (s) "
+          "| ms a lockstep step | lockstep vs in-process, same order |")
     print("|---|---|---:|---:|---:|---:|---:|")
     results["lockstep"] = {}
-    for label, rows in [("in-process, usual", local),
-                        *((f"service, {order}", rows) for order, rows in remote.items())]:
-        m = {key: statistics.median(r[key] for r in rows) for key in rows[0]}
-        results["lockstep"][label] = m
-        where, order = label.split(", ")
-        print(f"| {where} | {order} | {m['separate_s']:.1f} "
-              f"| {1e3 * m['separate_s'] / m['separate_steps']:.2f} | {m['lockstep_s']:.1f} "
-              f"| {1e3 * m['lockstep_s'] / m['lockstep_steps']:.2f} "
-              f"| {m['separate_s'] / m['lockstep_s']:.2f}x |")
+    for order in orders:
+        base = statistics.median(r["lockstep_s"] for r in local[order])
+        for where, rows in (("in-process", local[order]), ("service", remote[order])):
+            m = {key: statistics.median(r[key] for r in rows) for key in rows[0]}
+            results["lockstep"][f"{order}: {where}"] = m
+            print(f"| {order} | {where} | {m['separate_s']:.1f} "
+                  f"| {1e3 * m['separate_s'] / m['separate_steps']:.2f} | {m['lockstep_s']:.1f} "
+                  f"| {1e3 * m['lockstep_s'] / m['lockstep_steps']:.2f} "
+                  f"| {m['lockstep_s'] / base:.2f}x |")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
 
