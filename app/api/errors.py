@@ -63,9 +63,17 @@ def validation_error(_: Request, error: Exception) -> JSONResponse:
     if first.get("type") == "json_invalid":  # loc holds a character position, not a field
         return JSONResponse(error_body("invalid_json", first.get("msg", "invalid JSON")),
                             status_code=422)
-    loc = [str(p) for p in first.get("loc", ()) if p not in ("body", "query", "path")]
-    return JSONResponse(error_body("invalid_body", first.get("msg", "invalid request"),
+    where, *loc = [str(p) for p in first.get("loc", ("body",))]
+    return JSONResponse(error_body(_code_of(where, loc), first.get("msg", "invalid request"),
                                    ".".join(loc) or None), status_code=422)
+
+
+def _code_of(where: str, loc: list[str]) -> str:
+    """The part of the request at fault: ``invalid_body``, ``invalid_query`` or
+    ``invalid_path``; a model name in the path gets the registry's own ``invalid_name``."""
+    if where == "path" and loc == ["name"]:
+        return InvalidName.code
+    return f"invalid_{where}" if where in ("body", "query", "path") else "invalid_request"
 
 
 def http_error(_: Request, error: Exception) -> JSONResponse:

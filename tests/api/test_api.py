@@ -82,6 +82,16 @@ def test_snapshot_views(client: TestClient) -> None:
     assert "exact" not in client.get("/model", params={"exact": False}).json()
 
 
+@pytest.mark.parametrize(("params", "field"), [({"tpm": "bogus"}, "tpm"),
+                                               ({"action": "twelve"}, "action")])
+def test_a_bad_query_parameter_is_named_as_such(client: TestClient, params: dict[str, str],
+                                                field: str) -> None:
+    r = client.get("/model", params=params)
+    assert r.status_code == 422
+    assert r.json()["error"] | {"message": ""} == {"code": "invalid_query", "message": "",
+                                                    "field": field}
+
+
 def test_snapshot_put_restores_a_model_that_decides_alike(client: TestClient) -> None:
     client.post("/models", json={"name": "a", "config": {"reviser": {
         "activate_after_episodes": 1}}})
@@ -133,7 +143,7 @@ BAD = [
      "invalid_body", "colour"),
     ("/revise", "{not json", 422, "invalid_json", None),
     ("/models/ghost/revise", STEP, 404, "unknown_model", "name"),
-    ("/models/BAD!/revise", STEP, 422, "invalid_body", "name"),
+    ("/models/BAD!/revise", STEP, 422, "invalid_name", "name"),
     ("/models/default/revise/batch", {"steps": [STEP, {**STEP, "observation": [1.0]}, STEP]},
      422, "invalid_observation", "steps.1.observation"),
     ("/revise/batch", {"steps": [{**STEP, "model": "default"}, {**STEP, "model": "ghost"}]},
