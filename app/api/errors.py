@@ -64,14 +64,15 @@ def validation_error(_: Request, error: Exception) -> JSONResponse:
         return JSONResponse(error_body("invalid_json", first.get("msg", "invalid JSON")),
                             status_code=422)
     where, *loc = [str(p) for p in first.get("loc", ("body",))]
-    return JSONResponse(error_body(_code_of(where, loc), first.get("msg", "invalid request"),
-                                   ".".join(loc) or None), status_code=422)
+    return JSONResponse(error_body(_code_of(first.get("type", ""), where),
+                                   first.get("msg", "invalid request"), ".".join(loc) or None),
+                        status_code=422)
 
 
-def _code_of(where: str, loc: list[str]) -> str:
-    """The part of the request at fault: ``invalid_body``, ``invalid_query`` or
-    ``invalid_path``; a model name in the path gets the registry's own ``invalid_name``."""
-    if where == "path" and loc == ["name"]:
+def _code_of(kind: str, where: str) -> str:
+    """``invalid_name`` for a model name (the only input with a pattern), wherever it stands;
+    otherwise the part of the request at fault: ``invalid_body``, ``invalid_query``..."""
+    if kind == "string_pattern_mismatch":
         return InvalidName.code
     return f"invalid_{where}" if where in ("body", "query", "path") else "invalid_request"
 

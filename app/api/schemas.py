@@ -6,9 +6,11 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from app.service.registry import NAME
+
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=True)]
-ModelName = Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,63}$",
-                                 examples=["default", "run-3"])]
+NAME_PATTERN = f"^{NAME.pattern}$"  # the only patterned input: errors.py relies on that
+ModelName = Annotated[str, Field(pattern=NAME_PATTERN, examples=["default", "run-3"])]
 
 STEP_EXAMPLE: dict[str, Any] = {"observation": [14.2, 38.5, 15.0], "action": 0.8, "stream": "car-1"}
 

@@ -12,6 +12,7 @@ from app.api.convert import to_step
 from app.api.deps import BEARER_DOCUMENTED, RegistryDep, SettingsDep, check_token, require_token
 from app.api.errors import TooLarge
 from app.api.schemas import (
+    NAME_PATTERN,
     BatchRequest,
     BatchResponse,
     Decision,
@@ -27,7 +28,7 @@ ERRORS: dict[int | str, dict[str, object]] = {
     code: {"model": ErrorBody} for code in (401, 404, 413, 422)
 }
 router = APIRouter(tags=["revise"], responses=ERRORS)
-NamePath = Annotated[str, Path(pattern=r"^[a-z0-9][a-z0-9_-]{0,63}$", description="Model name.")]
+NamePath = Annotated[str, Path(pattern=NAME_PATTERN, description="Model name.")]
 
 
 async def step_one(registry: ModelRegistry, name: str, step: Step) -> CoreDecision:
