@@ -9,6 +9,8 @@ accepted one counts once.
 from __future__ import annotations
 
 import json
+import tempfile
+from pathlib import Path
 from typing import Any
 
 from fastapi.testclient import TestClient
@@ -57,8 +59,9 @@ anything = st.dictionaries(st.sampled_from(FIELDS), json_values)
 steps = st.one_of(valid, valid, broken(), broken(), anything)  # about half of them accepted
 
 
-def model_state(c: TestClient) -> Any:
-    return c.get("/model", params={"tpm": "none"}).json()["exact"]
+def exact(c: TestClient, name: str = "default") -> Any:
+    """The model's exact state, everything that decides its next answer."""
+    return c.get(f"/models/{name}", params={"tpm": "none"}).json()["exact"]
 
 
 def version(c: TestClient) -> int:
@@ -84,7 +87,7 @@ def test_any_single_step_is_answered_or_refused_without_a_trace() -> None:
         @given(steps)
         @settings(max_examples=150)
         def check(body: dict[str, Any]) -> None:
-            before, count = model_state(c), version(c)
+            before, count = exact(c), version(c)
             r = c.post("/revise", content=json.dumps(body),
                        headers={"content-type": "application/json"})
             if r.status_code == 200:
@@ -92,7 +95,7 @@ def test_any_single_step_is_answered_or_refused_without_a_trace() -> None:
                 assert r.json()["model_version"] == version(c)
             else:
                 check_refusal(r)
-                assert model_state(c) == before
+                assert exact(c) == before
 
         check()
 
@@ -103,7 +106,7 @@ def test_a_batch_with_any_step_broken_is_all_or_nothing() -> None:
         @given(st.lists(steps, min_size=1, max_size=5))
         @settings(max_examples=80)
         def check(batch: list[dict[str, Any]]) -> None:
-            before, count = model_state(c), version(c)
+            before, count = exact(c), version(c)
             r = c.post("/models/default/revise/batch", json={"steps": batch})
             if r.status_code == 200:
                 decisions = r.json()["decisions"]
@@ -111,7 +114,7 @@ def test_a_batch_with_any_step_broken_is_all_or_nothing() -> None:
                 assert version(c) == count + sum(map(learns, batch))
             else:
                 check_refusal(r)
-                assert model_state(c) == before
+                assert exact(c) == before
 
         check()
 
@@ -135,3 +138,30 @@ def test_any_websocket_frame_gets_one_reply_and_the_stream_goes_on() -> None:
         check()
         ws.send_text(json.dumps({"observation": [14.2, 38.5, 15.0], "action": 0.8}))
         assert json.loads(ws.receive_text())["action"] is not None
+
+
+mostly_valid = st.one_of(valid, valid, valid, broken())
+requests = st.lists(st.tuples(st.sampled_from(["default", "other"]), st.booleans(),
+                              st.lists(mostly_valid, min_size=1, max_size=3)),
+                    min_size=3, max_size=8)
+
+
+@given(requests, st.sampled_from([10**6, 3]))  # the journal alone, or snapshots too
+@settings(max_examples=30)
+def test_after_a_crash_every_accepted_step_and_no_refused_one_is_replayed(
+        sequence: list[tuple[str, bool, list[dict[str, Any]]]], snapshot_every: int) -> None:
+    """Steps and batches, some refused, on two models; then a second server starts on the same
+    data directory before the first shuts down (as after a crash, only the snapshots and the
+    journal tell it anything): its models are the first's, bit for bit."""
+    with tempfile.TemporaryDirectory() as data:
+        config = Settings(data_dir=Path(data), fsync="always", snapshot_every=snapshot_every)
+        with TestClient(create_app(config), raise_server_exceptions=False) as first:
+            first.post("/models", json={"name": "other"})
+            for name, batch, bodies in sequence:
+                if batch:
+                    first.post(f"/models/{name}/revise/batch", json={"steps": bodies})
+                else:
+                    first.post(f"/models/{name}/revise", json=bodies[0])
+            with TestClient(create_app(config)) as second:
+                for name in ("default", "other"):
+                    assert exact(second, name) == exact(first, name)
