@@ -21,8 +21,10 @@ def main(argv: list[str] | None = None) -> None:
     settings = Settings(_cli_parse_args=argv[1:])
     logging.basicConfig(level=settings.log_level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    # a WebSocket frame over the body limit gets an error frame (app/api/routes/stream.py);
+    # one over twice the limit is not read at all: the connection closes (1009)
     uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
-                log_level=settings.log_level)
+                log_level=settings.log_level, ws_max_size=2 * settings.max_body_bytes)
 
 
 if __name__ == "__main__":

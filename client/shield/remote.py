@@ -275,7 +275,7 @@ class ShieldSession:
     def _decision(reply: dict[str, Any]) -> Decision:
         if "error" in reply:
             e = reply["error"]
-            status = 404 if e["code"] == "unknown_model" else 422
+            status = {"unknown_model": 404, "too_large": 413}.get(e["code"], 422)
             raise ShieldAPIError(status, e["code"], e["message"], e.get("field"))
         return decision_from_json(reply)
 

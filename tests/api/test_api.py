@@ -251,6 +251,17 @@ def test_websocket_needs_the_token(strict_client: TestClient) -> None:
         assert ws.receive_json()["model_version"] == 1
 
 
+def test_a_websocket_frame_over_the_body_limit_is_refused_and_the_stream_goes_on(
+        strict_client: TestClient) -> None:
+    with strict_client.websocket_connect("/ws?token=s3cret") as ws:
+        padded = json.dumps(STEP)[:-1] + ', "stream": "' + "é" * 2100 + '"}'  # 4 KiB in UTF-8
+        ws.send_text(padded)
+        assert ws.receive_json()["error"] == {
+            "code": "too_large", "field": None, "message": "frame over 4096 bytes"}
+        ws.send_text(json.dumps(STEP))
+        assert ws.receive_json()["model_version"] == 1
+
+
 def test_metrics_count_requests_decisions_and_states(client: TestClient) -> None:
     episode(client)
     client.post("/models/ghost/revise", json=STEP)

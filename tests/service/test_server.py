@@ -138,6 +138,21 @@ def test_the_websocket_session_names_each_error_and_stays_in_step(tmp_path: Path
         server.stop()
 
 
+def test_a_websocket_frame_over_the_body_limit_is_refused_far_over_it_the_session_ends(
+        tmp_path: Path) -> None:
+    server = start_server(tmp_path / "data", "--max-body-bytes", "2048")
+    try:
+        with ShieldSession(server.url) as session:
+            with pytest.raises(ShieldAPIError) as refused:
+                session.revise([10.0, 50.0, 12.0], 0.5, stream="s" * 3000)
+            assert (refused.value.status, refused.value.code) == (413, "too_large")
+            assert session.revise([10.0, 50.0, 12.0], 0.5).model_version == 1
+            with pytest.raises(ShieldUnavailable, match="session lost"):
+                session.revise([10.0, 50.0, 12.0], 0.5, stream="s" * 5000)
+    finally:
+        server.stop()
+
+
 def test_settings_come_from_the_environment_too(tmp_path: Path) -> None:
     server = start_server(tmp_path / "data", env={"EFSM_TOKEN": "from-env"})
     try:

@@ -43,6 +43,7 @@ async def model_stream(websocket: WebSocket, name: NamePath) -> None:
         await websocket.send_text(json.dumps(error_body(error.code, error.message, "name")))
         await websocket.close(code=POLICY_VIOLATION)
         return
+    limit = app.state.settings.max_body_bytes  # a frame is held to the body limit of HTTP
     while True:
         try:
             message = await websocket.receive()
@@ -54,6 +55,10 @@ async def model_stream(websocket: WebSocket, name: NamePath) -> None:
         if text is None:
             await websocket.send_text(json.dumps(error_body(
                 "unsupported_frame", "send each step as a JSON text frame")))
+            continue
+        if 4 * len(text) > limit and len(text.encode()) > limit:  # UTF-8: 1-4 bytes a character
+            await websocket.send_text(json.dumps(error_body(
+                "too_large", f"frame over {limit} bytes")))
             continue
         await websocket.send_text(await answer(websocket, registry, name, text))
 
