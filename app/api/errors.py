@@ -2,18 +2,23 @@
 
 from __future__ import annotations
 
+import json
 import logging
+from collections.abc import Sequence
 from typing import Any
 
-from fastapi import FastAPI, Request
-from fastapi.exceptions import RequestValidationError
+from fastapi import FastAPI, Request, WebSocket
+from fastapi.exceptions import RequestValidationError, WebSocketRequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
+from starlette.requests import HTTPConnection
 
+from app.api.auth import given_token, token_ok
 from app.core import InvalidConfig, InvalidSnapshot, ShieldError
 from app.service.registry import InvalidName, ModelExists, UnknownModel
 
 log = logging.getLogger("app.api")
+POLICY_VIOLATION = 1008  # the WebSocket close code of a refused stream
 
 STATUS: dict[type[ShieldError], int] = {
     UnknownModel: 404,
@@ -57,16 +62,42 @@ def shield_error(_: Request, error: Exception) -> JSONResponse:
                         status_code=status_of(error), headers=headers)
 
 
-def validation_error(_: Request, error: Exception) -> JSONResponse:
+def validation_error(request: Request, error: Exception) -> JSONResponse:
+    """422 naming the input at fault; 401 first when the token is missing or wrong (routes
+    on the per-step path check it after validation)."""
     assert isinstance(error, RequestValidationError)
-    first = error.errors()[0]
+    if not _authorised(request):
+        return shield_error(request, Unauthorized("missing or wrong bearer token"))
+    return JSONResponse(_first_error(error.errors()), status_code=422)
+
+
+async def websocket_validation_error(websocket: WebSocket, error: Exception) -> None:
+    """A stream refused before it starts (a bad model name in its path): the error frame and
+    the close of an unknown model's stream, not a bare close whose reason echoes the input;
+    without the token, the close of a stream without it."""
+    assert isinstance(error, WebSocketRequestValidationError)
+    if not _authorised(websocket):
+        await websocket.close(code=POLICY_VIOLATION, reason="missing or wrong bearer token")
+        return
+    await websocket.accept()
+    await websocket.send_text(json.dumps(_first_error(error.errors())))
+    await websocket.close(code=POLICY_VIOLATION)
+
+
+def _authorised(connection: HTTPConnection) -> bool:
+    """The token as the route would take it: WebSockets may carry it in the query."""
+    query = connection.query_params if connection.scope["type"] == "websocket" else {}
+    return token_ok(connection.app.state.settings.token, given_token(connection.headers, query))
+
+
+def _first_error(errors: Sequence[Any]) -> dict[str, Any]:
+    """The error body of the first of pydantic's errors."""
+    first = errors[0]
     if first.get("type") == "json_invalid":  # loc holds a character position, not a field
-        return JSONResponse(error_body("invalid_json", first.get("msg", "invalid JSON")),
-                            status_code=422)
+        return error_body("invalid_json", first.get("msg", "invalid JSON"))
     where, *loc = [str(p) for p in first.get("loc", ("body",))]
-    return JSONResponse(error_body(_code_of(first.get("type", ""), where),
-                                   first.get("msg", "invalid request"), ".".join(loc) or None),
-                        status_code=422)
+    return error_body(_code_of(first.get("type", ""), where),
+                      first.get("msg", "invalid request"), ".".join(loc) or None)
 
 
 def _code_of(kind: str, where: str) -> str:
@@ -93,5 +124,6 @@ def install(app: FastAPI) -> None:
     """Register the handlers."""
     app.add_exception_handler(ShieldError, shield_error)
     app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_exception_handler(WebSocketRequestValidationError, websocket_validation_error)
     app.add_exception_handler(HTTPException, http_error)
     app.add_exception_handler(Exception, internal_error)

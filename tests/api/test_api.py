@@ -236,6 +236,39 @@ def test_websocket_steps_and_errors_keep_the_connection(client: TestClient) -> N
     assert (first["model_version"], second["model_version"]) == (1, 2)
 
 
+def test_without_the_token_a_bad_request_is_unauthorized_before_it_is_invalid(
+        strict_client: TestClient) -> None:
+    from starlette.websockets import WebSocketDisconnect
+
+    bad = [("/revise", {"observation": "x", "action": 0}), ("/models/BAD!/revise", STEP),
+           ("/models/default/revise/batch", {"steps": "x"}), ("/models", {"name": "Bad!"})]
+    for path, body in bad:
+        for headers in ({}, {"Authorization": "Bearer wrong"}):
+            r = strict_client.post(path, json=body, headers=headers)
+            assert (r.status_code, r.json()["error"]["code"]) == (401, "unauthorized"), path
+        r = strict_client.post(path, json=body, headers={"Authorization": "Bearer s3cret"})
+        assert r.status_code == 422, path
+    with pytest.raises(WebSocketDisconnect) as closed:
+        with strict_client.websocket_connect("/models/BAD!/ws") as ws:
+            ws.receive_text()
+    assert (closed.value.code, closed.value.reason) == (1008, "missing or wrong bearer token")
+    with strict_client.websocket_connect("/models/BAD!/ws?token=s3cret") as ws:
+        assert ws.receive_json()["error"]["code"] == "invalid_name"
+
+
+def test_a_websocket_to_a_bad_model_name_gets_the_error_frame_of_an_unknown_one(
+        client: TestClient) -> None:
+    from starlette.websockets import WebSocketDisconnect
+
+    for path, code in (("/models/ghost/ws", "unknown_model"), ("/models/BAD!/ws", "invalid_name")):
+        with client.websocket_connect(path) as ws:
+            error = ws.receive_json()["error"]
+            assert (error["code"], error["field"]) == (code, "name")
+            with pytest.raises(WebSocketDisconnect) as closed:
+                ws.receive_text()
+            assert closed.value.code == 1008
+
+
 def ws_msg(n: int) -> str:
     return f"observation must hold 3 numbers, got shape [{n}]"
 

@@ -7,9 +7,9 @@ import json
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
 
+from app.api.auth import given_token, token_ok
 from app.api.convert import to_step
-from app.api.deps import token_ok
-from app.api.errors import error_body
+from app.api.errors import POLICY_VIOLATION, error_body
 from app.api.routes.revise import NamePath, count, step_one
 from app.api.schemas import ReviseRequest
 from app.core import ShieldError
@@ -17,15 +17,6 @@ from app.service.codec import decision_json
 from app.service.registry import DEFAULT_MODEL, ModelRegistry
 
 router = APIRouter(tags=["stream"])
-POLICY_VIOLATION = 1008
-
-
-def bearer(websocket: WebSocket) -> str | None:
-    """The token from ``Authorization: Bearer`` or, for browsers, the ``token`` query."""
-    header = websocket.headers.get("authorization", "")
-    if header.lower().startswith("bearer "):
-        return header[7:]
-    return websocket.query_params.get("token")
 
 
 @router.websocket("/models/{name}/ws")
@@ -33,7 +24,8 @@ async def model_stream(websocket: WebSocket, name: NamePath) -> None:
     """A stream of steps for one model over one connection."""
     app = websocket.app
     registry: ModelRegistry = app.state.registry
-    if not token_ok(app.state.settings.token, bearer(websocket)):
+    if not token_ok(app.state.settings.token,
+                    given_token(websocket.headers, websocket.query_params)):
         await websocket.close(code=POLICY_VIOLATION, reason="missing or wrong bearer token")
         return
     await websocket.accept()

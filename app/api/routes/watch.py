@@ -12,7 +12,8 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi.responses import FileResponse, RedirectResponse, StreamingResponse
 
-from app.api.deps import RegistryDep, require_token, token_ok
+from app.api.auth import given_token, token_ok
+from app.api.deps import RegistryDep, require_token
 from app.api.errors import Unauthorized
 from app.api.routes.revise import ERRORS, NamePath
 from app.core import InvalidConfig
@@ -30,9 +31,8 @@ async def events(name: NamePath, request: Request, registry: RegistryDep,
                  ) -> StreamingResponse:
     """Server-sent events: one ``data:`` line per step of the model (its decision record, the
     observation, and the state when one appears or is flagged)."""
-    header = request.headers.get("authorization", "")
-    given = header[7:] if header.lower().startswith("bearer ") else token
-    if not token_ok(request.app.state.settings.token, given):
+    if not token_ok(request.app.state.settings.token,
+                    given_token(request.headers, {"token": token} if token else {})):
         raise Unauthorized("missing or wrong bearer token")
     model = registry.get(name)
     loop = asyncio.get_running_loop()
