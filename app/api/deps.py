@@ -7,7 +7,7 @@ from typing import Annotated, Any
 from fastapi import Depends, Request
 from fastapi.security import HTTPBearer
 
-from app.api.auth import token_ok
+from app.api.auth import given_token, token_ok
 from app.api.errors import Unauthorized
 from app.service.registry import ModelRegistry
 from app.settings import Settings
@@ -31,8 +31,7 @@ def check_token(request: Request) -> None:
     expected = request.app.state.settings.token
     if expected is None:
         return
-    scheme, _, given = request.headers.get("authorization", "").partition(" ")
-    if not token_ok(expected, given if scheme.lower() == "bearer" else None):
+    if not token_ok(expected, given_token(request.headers, {})):  # the header only
         raise Unauthorized("missing or wrong bearer token")
 
 
