@@ -20,7 +20,7 @@ import torch
 from client.experiment.records import RecordError
 
 DIRECTORY = "checkpoints"
-FORMAT = 1
+FORMAT = 2  # 2: the learner's weights and Adam moments as flat buffers (DDPGEnsemble.state)
 
 
 def path_for(out: Path, arm: str, group: Sequence[int]) -> Path:
@@ -49,7 +49,11 @@ def load(path: Path, identity: dict[str, Any]) -> dict[str, Any] | None:
         return None
     # our own file, holding numpy generator states and Python objects besides tensors
     saved = torch.load(path, map_location="cpu", weights_only=False)
-    if saved.get("format") != FORMAT or saved.get("identity") != identity:
+    if saved.get("format") != FORMAT:
+        raise RecordError(f"{path}: a checkpoint of format {saved.get('format')}, written by "
+                          f"another version of the client (this one reads {FORMAT}); remove it "
+                          f"to start the group again")
+    if saved.get("identity") != identity:
         raise RecordError(f"{path}: a checkpoint of another experiment or group; remove it to "
                           f"start the group again")
     state: dict[str, Any] = saved["state"]

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from app.core import Shield
 from app.service import codec
@@ -154,6 +155,17 @@ def test_a_checkpoint_of_another_experiment_is_refused(tmp_path: Path) -> None:
     other = dataclasses.replace(CONFIG, seed=8)
     with pytest.raises(RecordError, match="another experiment"):
         run_lockstep(other, ARM, tmp_path)
+
+
+def test_a_checkpoint_of_another_format_is_refused(tmp_path: Path) -> None:
+    """A checkpoint written by a client whose learner saved its state another way (format 1:
+    per-layer weights and an optimizer's state) is refused with what to do, not misread."""
+    run_lockstep(CONFIG, ARM, tmp_path, stop=after(50))
+    saved_at = checkpoint.pending(tmp_path)[0]
+    saved = torch.load(saved_at, weights_only=False)
+    torch.save({**saved, "format": 1}, saved_at)
+    with pytest.raises(RecordError, match="format 1, written by another version"):
+        run_lockstep(CONFIG, ARM, tmp_path)
 
 
 def test_a_group_goes_on_against_a_fresh_service(
