@@ -12,9 +12,9 @@ by hand, with the operations autograd's backward pass runs (``tests/client/test_
 checks that they agree bit for bit), and every weight, gradient and Adam moment of the ensemble
 in one flat buffer, so that Adam and the soft target update are a few kernels over all layers
 instead of a few per layer. On the CPU, where these small networks cost more in calls than in
-arithmetic, that makes ten members' update about 1.4 times as fast
+arithmetic, that makes ten members' update about 1.4-1.5 times as fast
 (``bench/learner_versions.py``); subnormal numbers are flushed to zero while updating
-(below), which adds a sixth to the pace of DDPG alone in the paper's protocol.
+(below), which gained DDPG alone in the paper's protocol another 2-22% (BENCHMARKS.md).
 
 On a CUDA device the whole update (both losses, both backward passes, both Adam steps and the
 soft update) is captured once as a CUDA graph and replayed: a few hundred kernels for every
@@ -211,9 +211,9 @@ class DDPGEnsemble:
         self._batch.copy_(torch.from_numpy(self._staging))
         if self.device.type != "cuda":
             # Subnormal numbers (Adam's moments of units that stopped learning decay into
-            # them) cost the CPU many times a normal number's arithmetic, a sixth of a
-            # lockstep step of DDPG alone; flushed to zero while updating, they changed no
-            # weight in any test or run compared (tests/client/test_ensemble.py)
+            # them) cost the CPU many times a normal number's arithmetic; flushed to zero
+            # while updating, they changed no weight in any test or run compared
+            # (tests/client/test_ensemble.py, BENCHMARKS.md)
             torch.set_flush_denormal(True)
             try:
                 self._step()
