@@ -115,9 +115,10 @@ class DDPGEnsemble:
         # every flat buffer holds the actor's layers, then the critic's
         self._online = self._flat([*actor, *critic])
         self._target = self._flat(targets)
-        self._moments = torch.zeros(2, self._online.numel(), device=self.device)  # Adam's
+        # Adam's first and second moments, and its step count of the actor and of the critic
+        self._moments = torch.zeros(2, self._online.numel(), device=self.device)
         self._grad = torch.zeros_like(self._online)
-        self._steps = torch.zeros(2, device=self.device)  # Adam's count: actor, critic
+        self._steps = torch.zeros(2, device=self.device)
         self._bind()
         self._prepare()
 
@@ -255,6 +256,8 @@ class DDPGEnsemble:
         h1, h2, q = _forward(self.critic, x)
         g1 = _backward(self.critic, x, h1, h2, torch.full_like(q, -size), None)
         grad_x = g1.bmm(self.critic[0].transpose(1, 2))
+        # back through the critic's input (action / A_MAX) and mu's output (tanh * A_MAX),
+        # each step as autograd takes it, though the two scalings cancel
         grad_action = grad_x[..., 4:5] / A_MAX
         grad_out = torch.ops.aten.tanh_backward(grad_action * A_MAX, squashed)
         _backward(self.actor, obs, a1, a2, grad_out, self._actor_grad)
