@@ -7,7 +7,7 @@ each round times a block of training steps (an update and an action of every mem
 ``bench/learner.py``) of one, then of the other, the order swapped every round, so that a
 drift of the machine's speed falls on both. Reported per ensemble size: the medians over
 rounds and the median of the rounds' ratios; and whether both ensembles hold the same weights,
-bit for bit, after every step they took.
+bit for bit, once they have taken all their steps.
 
     python bench/learner_versions.py f1e79d3 --rounds 7 --json bench/results/learner_versions.json
 """
