@@ -18,7 +18,10 @@ import numpy.typing as npt
 import torch
 from torch import nn
 
-MEMORY = ("obs", "next_obs", "action", "reward", "done")  # a transition's arrays
+# the columns of a stored transition; a checkpoint keeps them as arrays of these names
+COLUMNS = {"obs": slice(0, 4), "action": slice(4, 5), "reward": slice(5, 6),
+           "next_obs": slice(6, 10), "done": slice(10, 11)}
+TRANSITION = 11
 OBS_SCALE = np.array([32.0, 200.0, 32.0, 2.0], dtype=np.float32)  # z-bar: Eq. 9 normalised
 A_MAX = 2.0  # [m/s^2]
 
@@ -54,16 +57,19 @@ class ReplaySample(NamedTuple):
 
 
 class ReplayBuffer:
-    """A ring buffer of (z-bar, executed action, reward, next z-bar, terminal)."""
+    """A ring buffer of (z-bar, executed action, reward, next z-bar, terminal).
+
+    The transitions are the rows of one array, in the columns of :data:`COLUMNS`, so that a
+    batch is a single gather; ``obs``, ``action`` and the others are views of its columns.
+    """
 
     def __init__(self, size: int, seed: int) -> None:
         self.size = size
         self.rng = np.random.default_rng(seed)
-        self.obs = np.zeros((size, 4), np.float32)
-        self.next_obs = np.zeros((size, 4), np.float32)
-        self.action = np.zeros((size, 1), np.float32)
-        self.reward = np.zeros((size, 1), np.float32)
-        self.done = np.zeros((size, 1), np.float32)
+        self.transitions = np.zeros((size, TRANSITION), np.float32)
+        t = self.transitions
+        self.obs, self.action, self.reward = (t[:, COLUMNS[c]] for c in ("obs", "action", "reward"))
+        self.next_obs, self.done = t[:, COLUMNS["next_obs"]], t[:, COLUMNS["done"]]
         self.count = 0
 
     def add(self, obs: npt.NDArray[np.float32], action: float, reward: float,
@@ -80,22 +86,20 @@ class ReplayBuffer:
 
     def sample_into(self, rows: npt.NDArray[np.float32]) -> None:
         """Draw ``len(rows)`` transitions as :meth:`sample` would (the same generator draws),
-        written side by side into ``rows``: obs, action, reward, next obs, terminal."""
+        as whole rows of :attr:`transitions` (the columns of :data:`COLUMNS`)."""
         index = self.rng.integers(0, min(self.count, self.size), len(rows))
-        rows[:, 0:4], rows[:, 4:5], rows[:, 5:6] = self.obs[index], self.action[index], \
-            self.reward[index]
-        rows[:, 6:10], rows[:, 10:11] = self.next_obs[index], self.done[index]
+        np.take(self.transitions, index, axis=0, out=rows)
 
     def state(self) -> dict[str, Any]:
         """The transitions held and where the generator stands: :meth:`restore` continues
         exactly from here."""
         held = min(self.count, self.size)
         return {"count": self.count, "rng": self.rng.bit_generator.state,
-                **{name: getattr(self, name)[:held].copy() for name in MEMORY}}
+                **{name: getattr(self, name)[:held].copy() for name in COLUMNS}}
 
     def restore(self, state: dict[str, Any]) -> None:
         held = min(state["count"], self.size)
-        for name in MEMORY:
+        for name in COLUMNS:
             getattr(self, name)[:held] = state[name]
         self.count = state["count"]
         self.rng.bit_generator.state = state["rng"]

@@ -34,10 +34,9 @@ import torch
 from torch import nn
 from torch.optim.adam import adam
 
-from client.agents.ddpg import A_MAX, DDPG, DDPGConfig
+from client.agents.ddpg import A_MAX, DDPG, TRANSITION, DDPGConfig
 
 Params = list[torch.Tensor]  # W1, b1, W2, b2, W3, b3, each with a leading member dimension
-TRANSITION = 11  # columns of a stored transition: obs 4, action 1, reward 1, next obs 4, done 1
 EAGER_UPDATES = 3  # updates run eagerly (on a side stream) before a CUDA graph is captured
 BETAS, EPS = (0.9, 0.999), 1e-8  # torch.optim.Adam's defaults, which DDPG's optimisers use
 

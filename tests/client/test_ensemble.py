@@ -133,6 +133,25 @@ def test_the_update_is_autograds_and_adams_bit_for_bit() -> None:
             assert (exact == 0).any()  # dead units
 
 
+def test_a_batch_drawn_into_rows_is_the_batch_a_run_draws() -> None:
+    """The ensemble's draw (whole rows of the memory, one gather) takes the transitions a
+    separate run's draw takes, each field in its column, and leaves the generator where
+    that draw leaves it."""
+    separate, batched = DDPG(DDPGConfig(), 3).buffer, DDPG(DDPGConfig(), 3).buffer
+    rng = np.random.default_rng(1)
+    for _ in range(300):
+        obs, next_obs = rng.uniform(0, 1, 4).astype(np.float32), rng.uniform(0, 1, 4)
+        action, reward, terminal = rng.uniform(-2, 2), rng.uniform(-3, 0), rng.random() < 0.1
+        for memory in (separate, batched):
+            memory.add(obs, action, reward, next_obs.astype(np.float32), terminal)
+    rows = np.full((64, 11), np.nan, np.float32)
+    for _ in range(3):
+        batch = separate.sample(64)
+        batched.sample_into(rows)
+        assert np.array_equal(rows, torch.cat(list(batch), dim=1).numpy())
+        assert batch.done.sum() > 0
+
+
 CONFIG = runner.ExperimentConfig(
     arms=("ddpg+shield",), runs=3, episodes=5, seed=7, lead="synthetic",
     ddpg={"warmup": 64}, shield_config={"reviser": {"activate_after_episodes": 2}})
