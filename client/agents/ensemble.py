@@ -10,11 +10,11 @@ round differently, so results equal the unbatched path within rounding, not bit 
 The update is written out rather than left to autograd and ``torch.optim.Adam``: the gradients
 by hand, with the operations autograd's backward pass runs (``tests/client/test_ensemble.py``
 checks that they agree bit for bit), and every weight, gradient and Adam moment of the ensemble
-in one flat buffer, so that Adam and the soft target update are a few kernels over all layers
-instead of a few per layer. On the CPU, where these small networks cost more in calls than in
-arithmetic, that makes ten members' update about 1.4-1.5 times as fast
-(``bench/learner_versions.py``); subnormal numbers are flushed to zero while updating
-(below), which gained DDPG alone in the paper's protocol another 2-22% (BENCHMARKS.md).
+in one flat buffer (:mod:`client.agents.flat`), so that Adam and the soft target update are a
+few kernels over all layers instead of a few per layer. On the CPU, where these small networks
+cost more in calls than in arithmetic, that makes ten members' update about 1.4-1.5 times as
+fast (``bench/learner_versions.py``); subnormal numbers are flushed to zero while updating,
+which gained DDPG alone in the paper's protocol another 2-22% (BENCHMARKS.md).
 
 On a CUDA device the whole update (both losses, both backward passes, both Adam steps and the
 soft update) is captured once as a CUDA graph and replayed: a few hundred kernels for every
@@ -32,13 +32,12 @@ import numpy as np
 import numpy.typing as npt
 import torch
 from torch import nn
-from torch.optim.adam import adam
 
 from client.agents.ddpg import A_MAX, DDPG, TRANSITION, DDPGConfig
+from client.agents.flat import adam_step, subnormals_flushed, views
 
 Params = list[torch.Tensor]  # W1, b1, W2, b2, W3, b3, each with a leading member dimension
 EAGER_UPDATES = 3  # updates run eagerly (on a side stream) before a CUDA graph is captured
-BETAS, EPS = (0.9, 0.999), 1e-8  # torch.optim.Adam's defaults, which DDPG's optimisers use
 
 
 def _stack(modules: Sequence[nn.Module]) -> Params:
@@ -51,16 +50,6 @@ def _stack(modules: Sequence[nn.Module]) -> Params:
             rows = [getattr(member[depth], part).detach() for member in layers]
             params.append(torch.stack([r.T if part == "weight" else r[None] for r in rows]))
     return params
-
-
-def _views(flat: torch.Tensor, shapes: Sequence[torch.Size]) -> Params:
-    """Tensors of these shapes laid one after another in ``flat``, as views of it."""
-    views, start = [], 0
-    for shape in shapes:
-        size = math.prod(shape)
-        views.append(flat[start:start + size].view(shape))
-        start += size
-    return views
 
 
 def _forward(params: Params, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -127,8 +116,8 @@ class DDPGEnsemble:
     def _bind(self) -> None:
         """The layers as views of the flat buffers: what the update reads and writes."""
         layers = len(self._shapes) // 2
-        online, target = _views(self._online, self._shapes), _views(self._target, self._shapes)
-        grad = _views(self._grad, self._shapes)
+        online, target = views(self._online, self._shapes), views(self._target, self._shapes)
+        grad = views(self._grad, self._shapes)
         self.actor, self.critic = online[:layers], online[layers:]
         self.actor_target, self.critic_target = target[:layers], target[layers:]
         self._actor_grad, self._critic_grad = grad[:layers], grad[layers:]
@@ -136,13 +125,11 @@ class DDPGEnsemble:
         self._parts = [slice(0, split), slice(split, None)]  # the actor's and the critic's
 
     def _adam(self, network: int, lr: float) -> None:
-        """One Adam step of the actor (0) or the critic (1): ``torch.optim.Adam``'s arithmetic,
-        through its functional form, over the network's share of the flat buffers."""
+        """One Adam step of the actor (0) or the critic (1), over the network's share of the
+        flat buffers."""
         part = self._parts[network]
-        adam([self._online[part]], [self._grad[part]], [self._moments[0, part]],
-             [self._moments[1, part]], [], [self._steps[network]], foreach=True,
-             capturable=self.device.type == "cuda", amsgrad=False, beta1=BETAS[0],
-             beta2=BETAS[1], lr=lr, weight_decay=0.0, eps=EPS, maximize=False)
+        adam_step(self._online[part], self._grad[part], self._moments[:, part],
+                  self._steps[network], lr, capturable=self.device.type == "cuda")
 
     def _prepare(self) -> None:
         """Buffers for the sampled batch, sized for the current members; no graph yet."""
@@ -158,7 +145,7 @@ class DDPGEnsemble:
         index = torch.tensor(list(members), dtype=torch.long, device=self.device)
 
         def rows(flat: torch.Tensor) -> torch.Tensor:
-            return torch.cat([v[index].reshape(-1) for v in _views(flat, self._shapes)])
+            return torch.cat([v[index].reshape(-1) for v in views(flat, self._shapes)])
 
         self._online, self._target = rows(self._online), rows(self._target)
         self._moments = torch.stack([rows(m) for m in self._moments])
@@ -210,15 +197,8 @@ class DDPGEnsemble:
             member.buffer.sample_into(rows)
         self._batch.copy_(torch.from_numpy(self._staging))
         if self.device.type != "cuda":
-            # Subnormal numbers (Adam's moments of units that stopped learning decay into
-            # them) cost the CPU many times a normal number's arithmetic; flushed to zero
-            # while updating, they changed no weight in any test or run compared
-            # (tests/client/test_ensemble.py, BENCHMARKS.md)
-            torch.set_flush_denormal(True)
-            try:
+            with subnormals_flushed():
                 self._step()
-            finally:
-                torch.set_flush_denormal(False)
         elif self._graph is not None:
             self._graph.replay()
         elif self._eager_left > 0:  # warm-up outside any graph, as capture requires

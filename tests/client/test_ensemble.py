@@ -12,7 +12,8 @@ import torch
 from bench.rounding_drift import CONFIG as CONFIG_DRIFT
 from bench.rounding_drift import SEEDS, train_side_by_side
 from client.agents.ddpg import A_MAX, DDPG, DDPGConfig
-from client.agents.ensemble import DDPGEnsemble, Params, _forward, _views
+from client.agents.ensemble import DDPGEnsemble, Params, _forward
+from client.agents.flat import views
 from client.experiment import parallel, records, runner
 from client.experiment.lockstep import run_lockstep
 
@@ -234,7 +235,7 @@ def test_dropping_members_leaves_the_others_learning_as_before(device: str) -> N
 
             def rows(flat: torch.Tensor) -> torch.Tensor:
                 shapes = [p.shape for p in [*full.actor, *full.critic]]
-                return torch.cat([v[[0, 2]].reshape(-1) for v in _views(flat, shapes)])
+                return torch.cat([v[[0, 2]].reshape(-1) for v in views(flat, shapes)])
 
             for name in ("online", "target"):
                 assert torch.equal(kept[name], rows(before[name]))
