@@ -18,6 +18,8 @@ import numpy.typing as npt
 import torch
 from torch import nn
 
+from client.agents.flat import adam_step, subnormals_flushed, views
+
 # the columns of a stored transition; a checkpoint keeps them as arrays of these names
 COLUMNS = {"obs": slice(0, 4), "action": slice(4, 5), "reward": slice(5, 6),
            "next_obs": slice(6, 10), "done": slice(10, 11)}
@@ -152,7 +154,16 @@ class Critic(nn.Module):
 
 
 class DDPG:
-    """Actor, critic, their targets, the replay memory and the exploration noise of one run."""
+    """Actor, critic, their targets, the replay memory and the exploration noise of one run.
+
+    The update is written out rather than left to autograd and ``torch.optim.Adam``, as in
+    the lockstep ensemble: the gradients by hand with the operations autograd's backward
+    pass runs for these networks (``addmm``'s and the activations'), every weight, gradient
+    and Adam moment in one flat buffer (:mod:`client.agents.flat`; the modules' parameters
+    are views of it), so that an update costs fewer calls: about half the time
+    (``bench/learner_versions.py``). The weights are autograd's and ``torch.optim.Adam``'s
+    bit for bit (``tests/client/test_ddpg.py``), so runs recorded before replay as they did.
+    """
 
     def __init__(self, config: DDPGConfig, seed: int) -> None:
         self.config = config
@@ -162,13 +173,30 @@ class DDPG:
             self.actor_target, self.critic_target = Actor(config.hidden), Critic(config.hidden)
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.critic_target.load_state_dict(self.critic.state_dict())
-        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=config.actor_lr,
-                                          foreach=True)
-        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=config.critic_lr,
-                                           foreach=True)
-        self._online: list[torch.Tensor] = [*self.actor.parameters(), *self.critic.parameters()]
-        self._target: list[torch.Tensor] = [*self.actor_target.parameters(),
-                                            *self.critic_target.parameters()]
+        # every flat buffer holds the actor's layers, then the critic's; the modules'
+        # parameters become views of the online and target buffers
+        networks = (self.actor, self.critic)
+        params = [p for net in networks for p in net.parameters()]
+        self._shapes = [p.shape for p in params]
+        self._online = torch.cat([p.detach().reshape(-1) for p in params])
+        self._target = self._online.clone()
+        self._grad = torch.zeros_like(self._online)
+        self._moments = torch.zeros(2, self._online.numel())  # Adam's first and second
+        self._steps = torch.zeros(2)  # Adam's step counts of the actor and of the critic
+        for flat, modules in ((self._online, networks), (self._target,
+                                                          (self.actor_target, self.critic_target))):
+            owned = [p for net in modules for p in net.parameters()]
+            for param, view in zip(owned, views(flat, self._shapes), strict=True):
+                param.data = view
+        layers = [p.detach() for p in params]
+        grads = views(self._grad, self._shapes)
+        split = len(layers) // 2
+        self._layers = layers[:split], layers[split:]
+        self._target_layers = ([p.detach() for p in self.actor_target.parameters()],
+                               [p.detach() for p in self.critic_target.parameters()])
+        self._grads = grads[:split], grads[split:]
+        cut = sum(p.numel() for p in self.actor.parameters())
+        self._parts = slice(0, cut), slice(cut, None)  # the actor's and the critic's
         self.buffer = ReplayBuffer(config.buffer_size, seed + 1)
         self.noise = OrnsteinUhlenbeckNoise(config.ou_theta, config.ou_sigma, seed + 2)
 
@@ -188,25 +216,81 @@ class DDPG:
                  next_obs: npt.NDArray[np.float32], terminal: bool) -> None:
         self.buffer.add(self.scale(obs), executed, reward, self.scale(next_obs), terminal)
 
-    def update(self) -> dict[str, float]:
+    def update(self) -> None:
         """One gradient step of critic and actor, then the soft target update."""
         cfg = self.config
         if self.buffer.count < max(cfg.warmup, cfg.batch_size):
-            return {}
-        batch = self.buffer.sample(cfg.batch_size)
-        with torch.no_grad():
-            next_q = self.critic_target(batch.next_obs, self.actor_target(batch.next_obs))
-            target = batch.reward + cfg.gamma * (1.0 - batch.done) * next_q
-        critic_loss = nn.functional.mse_loss(self.critic(batch.obs, batch.action), target)
-        self.critic_opt.zero_grad()
-        critic_loss.backward()  # type: ignore[no-untyped-call]
-        self.critic_opt.step()
-        self.critic.requires_grad_(False)  # the actor's loss needs no critic gradients
-        actor_loss = -self.critic(batch.obs, self.actor(batch.obs)).mean()
-        self.actor_opt.zero_grad()
-        actor_loss.backward()
-        self.actor_opt.step()
-        self.critic.requires_grad_(True)
-        with torch.no_grad():  # soft update: theta' <- theta' + tau (theta - theta')
-            torch._foreach_lerp_(self._target, self._online, cfg.tau)
-        return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item()}
+            return
+        with subnormals_flushed():
+            self._step(self.buffer.sample(cfg.batch_size))
+
+    def _step(self, batch: ReplaySample) -> None:
+        cfg = self.config
+        (actor, critic), (actor_target, critic_target) = self._layers, self._target_layers
+        # critic: minimise the mean of (Q(z, a) - y)^2, y = r + gamma (1 - done) Q'(z', mu'(z'))
+        next_q = _forward(critic_target, _critic_input(batch.next_obs,
+                                                       _mu(actor_target, batch.next_obs)))[2]
+        target = batch.reward + cfg.gamma * (1.0 - batch.done) * next_q
+        x = _critic_input(batch.obs, batch.action)
+        h1, h2, q = _forward(critic, x)
+        # mse_loss's gradient, 2 (q - y) / batch (times the loss's own gradient, 1)
+        _backward(critic, x, h1, h2, (q - target) * (2.0 / q.numel()), self._grads[1])
+        self._adam(1, cfg.critic_lr)
+        # actor: maximise the mean of Q(z, mu(z)), through the critic just updated
+        a1, a2, out = _forward(actor, batch.obs)
+        squashed = torch.tanh(out)
+        x = _critic_input(batch.obs, squashed * A_MAX)
+        h1, h2, q = _forward(critic, x)
+        g1 = _backward(critic, x, h1, h2, torch.full_like(q, -1.0 / q.numel()), None)
+        # back through the critic's input (action / A_MAX) and mu's output (tanh * A_MAX),
+        # each step as autograd takes it, though the two scalings cancel
+        grad_action = g1.mm(critic[0])[:, 4:5] / A_MAX
+        grad_out = torch.ops.aten.tanh_backward(grad_action * A_MAX, squashed)
+        _backward(actor, batch.obs, a1, a2, grad_out, self._grads[0])
+        self._adam(0, cfg.actor_lr)
+        # soft update: theta' <- theta' + tau (theta - theta')
+        self._target.lerp_(self._online, cfg.tau)
+
+    def _adam(self, network: int, lr: float) -> None:
+        """One Adam step of the actor (0) or the critic (1)."""
+        part = self._parts[network]
+        adam_step(self._online[part], self._grad[part], self._moments[:, part],
+                  self._steps[network], lr)
+
+
+def _forward(layers: list[torch.Tensor], x: torch.Tensor,
+             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The MLP's two hidden activations and its output, as ``nn.Linear`` computes them
+    (``addmm`` of the bias, the input and the transposed weight)."""
+    h1 = torch.relu(torch.addmm(layers[1], x, layers[0].t()))
+    h2 = torch.relu(torch.addmm(layers[3], h1, layers[2].t()))
+    return h1, h2, torch.addmm(layers[5], h2, layers[4].t())
+
+
+def _backward(layers: list[torch.Tensor], x: torch.Tensor, h1: torch.Tensor, h2: torch.Tensor,
+              grad_out: torch.Tensor, grads: list[torch.Tensor] | None) -> torch.Tensor:
+    """Back-propagate ``grad_out`` through the MLP of :func:`_forward`, writing the gradients
+    of its weights into ``grads`` where given; returns the gradient at the first layer's
+    output (before its relu).
+
+    The operations of autograd's backward of ``addmm`` and ``relu``: for ``x W^T + b``,
+    ``dW = g^T x``, ``db`` the sum of ``g`` over the batch, ``dx = g W``; ``relu`` passes the
+    gradient where its output is positive.
+    """
+    relu_backward = torch.ops.aten.threshold_backward
+    g2 = relu_backward(grad_out.mm(layers[4]), h2, 0)
+    g1: torch.Tensor = relu_backward(g2.mm(layers[2]), h1, 0)
+    if grads is not None:
+        for (w, b), inputs, g in zip(((4, 5), (2, 3), (0, 1)), (h2, h1, x),
+                                     (grad_out, g2, g1), strict=True):
+            grads[w].copy_(g.t().mm(inputs))  # mm(out=...) may round otherwise
+            torch.sum(g, dim=0, out=grads[b])
+    return g1
+
+
+def _mu(layers: list[torch.Tensor], obs: torch.Tensor) -> torch.Tensor:
+    return torch.tanh(_forward(layers, obs)[2]) * A_MAX
+
+
+def _critic_input(obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+    return torch.cat([obs, action / A_MAX], dim=1)
