@@ -1,15 +1,15 @@
-"""The lockstep learner of another commit beside this checkout's: did a change make it faster?
+"""The learners of another commit beside this checkout's: did a change make them faster?
 
-The other commit's ``client/agents/ensemble.py`` is loaded as a module of its own (it must
-share this checkout's ``client/agents/ddpg.py``, which it builds its members from), and both
-ensembles, of the same seeds and holding the same transitions, take turns in one process:
-each round times a block of training steps (an update and an action of every member, as
-``bench/learner.py``) of one, then of the other, the order swapped every round, so that a
-drift of the machine's speed falls on both. Reported per ensemble size: the medians over
-rounds and the median of the rounds' ratios; and whether both ensembles hold the same weights,
-bit for bit, once they have taken all their steps.
+The other commit's ``client/agents`` package is loaded as a package of its own, and its
+learners take turns with this checkout's in one process: one run's learner (``DDPG``) and
+lockstep ensembles (``DDPGEnsemble``) of 1, 5 and 10 members, of the same seeds and holding
+the same transitions. Each round times a block of training steps (an update and an action of
+every member, as ``bench/learner.py``) of one, then of the other, the order swapped every
+round, so that a drift of the machine's speed falls on both. Reported per learner: the
+medians over rounds and the median of the rounds' ratios; and whether both hold the same
+weights, bit for bit, once they have taken all their steps.
 
-    python bench/learner_versions.py f1e79d3 --rounds 7 --json bench/results/learner_versions.json
+    python bench/learner_versions.py 8720798 --rounds 7 --json bench/results/learner_versions.json
 """
 
 from __future__ import annotations
@@ -34,27 +34,31 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.learner import CONFIG, fill  # noqa: E402
-from client.agents import ensemble as this  # noqa: E402
+from client.agents import ddpg as this_ddpg  # noqa: E402
+from client.agents import ensemble as this_ensemble  # noqa: E402
 
 SIZES = (1, 5, 10)
 
 
-def load_ensemble(commit: str, directory: Path) -> ModuleType:
-    """``client/agents/ensemble.py`` as it was at ``commit``."""
-    def show(path: str) -> str:
-        return subprocess.run(["git", "show", f"{commit}:{path}"], cwd=ROOT, check=True,
-                              capture_output=True, text=True).stdout
+def load_agents(commit: str, directory: Path) -> ModuleType:
+    """``client/agents`` as it was at ``commit``, as a package of its own whose modules
+    import each other, not this checkout's."""
+    def git(*args: str) -> str:
+        return subprocess.run(["git", *args], cwd=ROOT, check=True, capture_output=True,
+                              text=True).stdout
 
-    if show("client/agents/ddpg.py") != (ROOT / "client/agents/ddpg.py").read_text():
-        sys.exit(f"{commit} has another client/agents/ddpg.py: the two learners would differ "
-                 f"in more than the ensemble")
-    source = directory / f"ensemble_{commit}.py"
-    source.write_text(show("client/agents/ensemble.py"))
-    spec = importlib.util.spec_from_file_location(f"ensemble_{commit}", source)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    name = f"agents_{commit}"
+    package = directory / name
+    package.mkdir()
+    for path in git("ls-tree", "--name-only", f"{commit}:client/agents").split():
+        if path.endswith(".py"):
+            source = git("show", f"{commit}:client/agents/{path}")
+            (package / path).write_text(source.replace("client.agents.", f"{name}."))
+    sys.path.insert(0, str(directory))
+    agents = importlib.import_module(name)
+    for module in ("ddpg", "ensemble"):
+        importlib.import_module(f"{name}.{module}")
+    return agents
 
 
 def block_ms(learner: Any, obs: np.ndarray, steps: int) -> float:
@@ -66,55 +70,75 @@ def block_ms(learner: Any, obs: np.ndarray, steps: int) -> float:
     return (time.perf_counter() - start) / steps * 1e3
 
 
-def same_weights(a: Any, b: Any) -> bool:
-    return all(torch.equal(x, y) for x, y in zip(
-        [*a.actor, *a.critic, *a.actor_target, *a.critic_target],
-        [*b.actor, *b.critic, *b.actor_target, *b.critic_target], strict=True))
+def weights(learner: Any) -> list[torch.Tensor]:
+    """Every weight and target weight of a learner of either kind."""
+    if hasattr(learner, "members"):
+        return [*learner.actor, *learner.critic, *learner.actor_target, *learner.critic_target]
+    return [p.detach() for net in (learner.actor, learner.critic, learner.actor_target,
+                                   learner.critic_target) for p in net.parameters()]
 
 
-def compare(other: ModuleType, members: int, rounds: int, steps: int) -> dict[str, Any]:
-    seeds = list(range(members))
-    learners = {"other": other.DDPGEnsemble(CONFIG, seeds),
-                "this": this.DDPGEnsemble(CONFIG, seeds)}
-    for learner in learners.values():
-        fill(learner.members)
-    obs = np.full((members, 4), 10.0, np.float32)
+def compare(learners: dict[str, Any], obs: np.ndarray, rounds: int,
+            steps: int) -> dict[str, Any]:
     for learner in learners.values():  # warm-up: allocator, first Adam steps
         block_ms(learner, obs, 10)
     times: dict[str, list[float]] = {"other": [], "this": []}
     for r in range(rounds):
         for name in ("other", "this") if r % 2 == 0 else ("this", "other"):
             times[name].append(block_ms(learners[name], obs, steps))
+    identical = all(torch.equal(x, y) for x, y in zip(
+        weights(learners["other"]), weights(learners["this"]), strict=True))
     return {"other_ms": statistics.median(times["other"]),
             "this_ms": statistics.median(times["this"]),
             "speed_up": statistics.median(o / t for o, t in zip(times["other"], times["this"],
                                                                 strict=True)),
-            "rounds": times, "identical": same_weights(learners["other"], learners["this"])}
+            "rounds": times, "identical": identical}
+
+
+def separate(other: ModuleType, rounds: int, steps: int) -> dict[str, Any]:
+    """One run's learner of each commit."""
+    learners = {"other": other.ddpg.DDPG(CONFIG, 0), "this": this_ddpg.DDPG(CONFIG, 0)}
+    fill([learners["other"]])
+    fill([learners["this"]])
+    return compare(learners, np.full(4, 10.0, np.float32), rounds, steps)
+
+
+def ensembles(other: ModuleType, members: int, rounds: int, steps: int) -> dict[str, Any]:
+    """A lockstep ensemble of ``members`` of each commit."""
+    seeds = list(range(members))
+    learners = {"other": other.ensemble.DDPGEnsemble(CONFIG, seeds),
+                "this": this_ensemble.DDPGEnsemble(CONFIG, seeds)}
+    for learner in learners.values():
+        fill(learner.members)
+    return compare(learners, np.full((members, 4), 10.0, np.float32), rounds, steps)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("commit", help="the commit whose ensemble is the baseline")
+    parser.add_argument("commit", help="the commit whose learners are the baseline")
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--steps", type=int, default=200)
     parser.add_argument("--json", help="also write the results here")
     args = parser.parse_args()
     torch.set_num_threads(1)
     with tempfile.TemporaryDirectory() as directory:
-        other = load_ensemble(args.commit, Path(directory))
+        other = load_agents(args.commit, Path(directory))
         results: dict[str, Any] = {
             "machine": platform.machine(), "processor": platform.processor(),
             "python": platform.python_version(), "torch": torch.__version__,
-            "baseline": args.commit, "rounds": args.rounds, "steps": args.steps, "members": {}}
+            "baseline": args.commit, "rounds": args.rounds, "steps": args.steps, "learners": {}}
         print(f"\n{args.rounds} rounds of {args.steps} steps; torch {torch.__version__} "
               f"(1 CPU thread)\n")
-        print(f"| learners | {args.commit} (ms per step) | this checkout | speed-up (paired) "
+        print(f"| learner | {args.commit} (ms per step) | this checkout | speed-up (paired) "
               f"| identical weights |")
-        print("|---:|---:|---:|---:|---|")
-        for members in SIZES:
-            row = compare(other, members, args.rounds, args.steps)
-            results["members"][members] = row
-            print(f"| {members} | {row['other_ms']:.2f} | {row['this_ms']:.2f} | "
+        print("|---|---:|---:|---:|---|")
+        rows = [("one run (DDPG)", lambda: separate(other, args.rounds, args.steps))] + [
+            (f"lockstep, {m} run{'s' if m > 1 else ''}",
+             lambda m=m: ensembles(other, m, args.rounds, args.steps)) for m in SIZES]
+        for label, measure in rows:
+            row = measure()
+            results["learners"][label] = row
+            print(f"| {label} | {row['other_ms']:.2f} | {row['this_ms']:.2f} | "
                   f"{row['speed_up']:.2f}x | {'yes' if row['identical'] else 'no'} |")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
