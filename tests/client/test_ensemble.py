@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -98,6 +99,25 @@ class AutogradUpdate:
                                               (self.critic_opt, self.critic)) for p in params])
 
 
+def assert_moments_are_adams(moments: torch.Tensor,
+                             reference: Callable[[str], torch.Tensor]) -> None:
+    """Adam's first and second moments (the rows of ``moments``) equal ``torch.optim.Adam``'s
+    (``reference("exp_avg")``, ``reference("exp_avg_sq")``) but for the subnormal ones, which
+    the learners flush to zero where the CPU can; such moments, and dead units, must occur,
+    so that the flushing was put to the test."""
+    tiny = torch.finfo(torch.float32).tiny
+    flushes = torch.set_flush_denormal(True)  # whether this CPU can
+    torch.set_flush_denormal(False)
+    for row, name in zip(moments, ("exp_avg", "exp_avg_sq"), strict=True):
+        exact = reference(name)
+        subnormal = (exact != 0) & (exact.abs() < tiny)
+        assert torch.equal(row, torch.where(subnormal, 0.0, exact) if flushes else exact)
+        if name == "exp_avg":
+            assert subnormal.any()
+        else:
+            assert (exact == 0).any()  # dead units
+
+
 def test_the_update_is_autograds_and_adams_bit_for_bit() -> None:
     """Gradients by hand and Adam over flat buffers: the same operations as autograd's
     backward pass and ``torch.optim.Adam``, so weights and targets agree with theirs exactly,
@@ -121,17 +141,7 @@ def test_the_update_is_autograds_and_adams_bit_for_bit() -> None:
                                                    [*reference.actor, *reference.critic]]))
     assert torch.equal(state["target"], torch.cat([p.reshape(-1) for p in reference.targets]))
     assert state["steps"].tolist() == [1000.0, 1000.0]
-    tiny = torch.finfo(torch.float32).tiny
-    flushes = torch.set_flush_denormal(True)  # whether this CPU can
-    torch.set_flush_denormal(False)
-    for moments, name in zip(state["moments"], ("exp_avg", "exp_avg_sq"), strict=True):
-        exact = reference.moments(name)
-        subnormal = (exact != 0) & (exact.abs() < tiny)
-        assert torch.equal(moments, torch.where(subnormal, 0.0, exact) if flushes else exact)
-        if name == "exp_avg":
-            assert subnormal.any()
-        else:
-            assert (exact == 0).any()  # dead units
+    assert_moments_are_adams(state["moments"], reference.moments)
 
 
 def test_a_batch_drawn_into_rows_is_the_batch_a_run_draws() -> None:
