@@ -174,8 +174,8 @@ class DDPG:
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.critic_target.load_state_dict(self.critic.state_dict())
         # every flat buffer holds the actor's layers, then the critic's; the modules'
-        # parameters become views of the online and target buffers
-        networks = (self.actor, self.critic)
+        # parameters become views of the online and target buffers (equal at the start)
+        networks, targets = (self.actor, self.critic), (self.actor_target, self.critic_target)
         params = [p for net in networks for p in net.parameters()]
         self._shapes = [p.shape for p in params]
         self._online = torch.cat([p.detach().reshape(-1) for p in params])
@@ -183,17 +183,15 @@ class DDPG:
         self._grad = torch.zeros_like(self._online)
         self._moments = torch.zeros(2, self._online.numel())  # Adam's first and second
         self._steps = torch.zeros(2)  # Adam's step counts of the actor and of the critic
-        for flat, modules in ((self._online, networks), (self._target,
-                                                          (self.actor_target, self.critic_target))):
+        online, target = views(self._online, self._shapes), views(self._target, self._shapes)
+        for modules, layers in ((networks, online), (targets, target)):
             owned = [p for net in modules for p in net.parameters()]
-            for param, view in zip(owned, views(flat, self._shapes), strict=True):
+            for param, view in zip(owned, layers, strict=True):
                 param.data = view
-        layers = [p.detach() for p in params]
+        split = len(params) // 2
         grads = views(self._grad, self._shapes)
-        split = len(layers) // 2
-        self._layers = layers[:split], layers[split:]
-        self._target_layers = ([p.detach() for p in self.actor_target.parameters()],
-                               [p.detach() for p in self.critic_target.parameters()])
+        self._layers, self._target_layers = (online[:split], online[split:]), \
+            (target[:split], target[split:])
         self._grads = grads[:split], grads[split:]
         cut = sum(p.numel() for p in self.actor.parameters())
         self._parts = slice(0, cut), slice(cut, None)  # the actor's and the critic's
