@@ -9,13 +9,13 @@ round, so that a drift of the machine's speed falls on both. Reported per learne
 medians over rounds and the median of the rounds' ratios; and whether both hold the same
 weights, bit for bit, once they have taken all their steps.
 
-    python bench/learner_versions.py 8720798 --rounds 7 --json bench/results/learner_versions.json
+    python bench/learner_versions.py 8720798 --json bench/results/learner_versions_8720798.json
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib.util
+import importlib
 import json
 import platform
 import statistics
@@ -98,8 +98,8 @@ def compare(learners: dict[str, Any], obs: np.ndarray, rounds: int,
 def separate(other: ModuleType, rounds: int, steps: int) -> dict[str, Any]:
     """One run's learner of each commit."""
     learners = {"other": other.ddpg.DDPG(CONFIG, 0), "this": this_ddpg.DDPG(CONFIG, 0)}
-    fill([learners["other"]])
-    fill([learners["this"]])
+    for learner in learners.values():  # each from the same generator: the same transitions
+        fill([learner])
     return compare(learners, np.full(4, 10.0, np.float32), rounds, steps)
 
 
