@@ -69,9 +69,8 @@ class ReplayBuffer:
         self.size = size
         self.rng = np.random.default_rng(seed)
         self.transitions = np.zeros((size, TRANSITION), np.float32)
-        t = self.transitions
-        self.obs, self.action, self.reward = (t[:, COLUMNS[c]] for c in ("obs", "action", "reward"))
-        self.next_obs, self.done = t[:, COLUMNS["next_obs"]], t[:, COLUMNS["done"]]
+        self.obs, self.action, self.reward, self.next_obs, self.done = (
+            self.transitions[:, COLUMNS[name]] for name in COLUMNS)
         self.count = 0
 
     def add(self, obs: npt.NDArray[np.float32], action: float, reward: float,
