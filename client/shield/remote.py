@@ -68,8 +68,30 @@ def _raise_for(response: httpx.Response) -> None:
     raise ShieldAPIError(response.status_code, error["code"], error["message"], error.get("field"))
 
 
-def _path(model: str | None, suffix: str) -> str:
-    return f"/{suffix}" if model is None else f"/models/{model}/{suffix}"
+def _auth(token: str | None) -> dict[str, str]:
+    return {"Authorization": f"Bearer {token}"} if token else {}
+
+
+class StepRequests:
+    """The requests of the per-step routes, built from what the client fixed once (URLs and
+    headers; ``send`` adds the client's timeout): httpx's general request building (merging
+    URLs, headers and cookies) costs about 0.3 ms a request on a 2-core machine, about a
+    model's step."""
+
+    def __init__(self, http: httpx.Client | httpx.AsyncClient, model: str | None) -> None:
+        base = str(http.base_url).rstrip("/") + ("" if model is None else f"/models/{model}")
+        self._revise = httpx.URL(f"{base}/revise")
+        self._batch = httpx.URL(f"{base}/revise/batch")
+        self._headers = dict(http.headers)
+
+    def revise(self, body: dict[str, Any]) -> httpx.Request:
+        return self._post(self._revise, body)
+
+    def batch(self, steps: Sequence[Mapping[str, Any]]) -> httpx.Request:
+        return self._post(self._batch, {"steps": list(steps)})
+
+    def _post(self, url: httpx.URL, body: dict[str, Any]) -> httpx.Request:
+        return httpx.Request("POST", url, json=body, headers=self._headers)
 
 
 class ShieldClient:
@@ -77,13 +99,16 @@ class ShieldClient:
 
     def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
                  timeout: float = DEFAULT_TIMEOUT) -> None:
-        headers = {"Authorization": f"Bearer {token}"} if token else {}
         self.model = model
-        self._http = httpx.Client(base_url=url, headers=headers, timeout=timeout)
+        self._http = httpx.Client(base_url=url, headers=_auth(token), timeout=timeout)
+        self._steps = StepRequests(self._http, model)
 
     def _call(self, method: str, path: str, **kwargs: Any) -> Any:
+        return self._send(self._http.build_request(method, path, **kwargs))
+
+    def _send(self, request: httpx.Request) -> Any:
         try:
-            response = self._http.request(method, path, **kwargs)
+            response = self._http.send(request)
         except httpx.TransportError as error:
             raise ShieldUnavailable(f"shield at {self._http.base_url} unreachable: {error}") \
                 from error
@@ -94,12 +119,11 @@ class ShieldClient:
                **options: Any) -> Decision:
         """One step; options are the API's (stream, event, done, applied_action, learn, ...)."""
         body = step_body(observation, action, **options)
-        return decision_from_json(self._call("POST", _path(self.model, "revise"), json=body))
+        return decision_from_json(self._send(self._steps.revise(body)))
 
     def revise_batch(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
         """Steps in order (each a step body; with a ``model`` key when no model is set)."""
-        path = "/revise/batch" if self.model is None else f"/models/{self.model}/revise/batch"
-        result = self._call("POST", path, json={"steps": list(steps)})
+        result = self._send(self._steps.batch(steps))
         return [decision_from_json(d) for d in result["decisions"]]
 
     def snapshot(self, name: str | None = None, **query: Any) -> dict[str, Any]:
@@ -146,13 +170,16 @@ class AsyncShieldClient:
 
     def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
                  timeout: float = DEFAULT_TIMEOUT) -> None:
-        headers = {"Authorization": f"Bearer {token}"} if token else {}
         self.model = model
-        self._http = httpx.AsyncClient(base_url=url, headers=headers, timeout=timeout)
+        self._http = httpx.AsyncClient(base_url=url, headers=_auth(token), timeout=timeout)
+        self._steps = StepRequests(self._http, model)
 
     async def _call(self, method: str, path: str, **kwargs: Any) -> Any:
+        return await self._send(self._http.build_request(method, path, **kwargs))
+
+    async def _send(self, request: httpx.Request) -> Any:
         try:
-            response = await self._http.request(method, path, **kwargs)
+            response = await self._http.send(request)
         except httpx.TransportError as error:
             raise ShieldUnavailable(f"shield at {self._http.base_url} unreachable: {error}") \
                 from error
@@ -162,12 +189,10 @@ class AsyncShieldClient:
     async def revise(self, observation: Sequence[float], action: float | None,
                      **options: Any) -> Decision:
         body = step_body(observation, action, **options)
-        return decision_from_json(await self._call("POST", _path(self.model, "revise"),
-                                                   json=body))
+        return decision_from_json(await self._send(self._steps.revise(body)))
 
     async def revise_batch(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
-        path = "/revise/batch" if self.model is None else f"/models/{self.model}/revise/batch"
-        result = await self._call("POST", path, json={"steps": list(steps)})
+        result = await self._send(self._steps.batch(steps))
         return [decision_from_json(d) for d in result["decisions"]]
 
     async def snapshot(self, name: str | None = None, **query: Any) -> dict[str, Any]:

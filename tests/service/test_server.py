@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import socket
 import subprocess
 import sys
 import threading
@@ -111,6 +112,49 @@ def test_an_unreachable_shield_is_one_clear_error() -> None:
         ShieldClient(f"http://127.0.0.1:{free_port()}", timeout=1).health()
     with pytest.raises(ShieldUnavailable, match="unreachable"):
         ShieldSession(f"http://127.0.0.1:{free_port()}", timeout=1)
+
+
+def test_a_shield_that_never_answers_a_step_times_out() -> None:
+    with socket.create_server(("127.0.0.1", 0)) as silent:  # accepts, never answers
+        url = f"http://127.0.0.1:{silent.getsockname()[1]}"
+        started = time.monotonic()
+        with ShieldClient(url, timeout=0.5) as shield:
+            with pytest.raises(ShieldUnavailable, match="unreachable"):
+                shield.revise([10.0, 50.0, 12.0], 0.5)
+            with pytest.raises(ShieldUnavailable, match="unreachable"):
+                shield.revise_batch([{"observation": [10.0, 50.0, 12.0], "model": "default"}])
+
+        async def revise_async() -> None:
+            async with AsyncShieldClient(url, timeout=0.5) as shield:
+                await shield.revise([10.0, 50.0, 12.0], 0.5)
+
+        with pytest.raises(ShieldUnavailable, match="unreachable"):
+            asyncio.run(revise_async())
+        assert time.monotonic() - started < 10
+
+
+def test_the_clients_steps_carry_the_token(tmp_path: Path) -> None:
+    server = start_server(tmp_path / "data", "--token", "secret")
+    step = {"observation": [10.0, 50.0, 12.0], "action": 0.5}
+    try:
+        with ShieldClient(server.url, token="secret") as shield:
+            assert shield.revise(**step).model_version == 1
+            assert shield.revise_batch([{**step, "model": "default"}])[0].model_version == 2
+        with ShieldClient(server.url, token="wrong", model="default") as shield:
+            for call in (lambda: shield.revise(**step), lambda: shield.revise_batch([step])):
+                with pytest.raises(ShieldAPIError) as refused:
+                    call()
+                assert (refused.value.status, refused.value.code) == (401, "unauthorized")
+
+        async def revise_async(token: str) -> Decision:
+            async with AsyncShieldClient(server.url, token=token, model="default") as shield:
+                return (await shield.revise_batch([step]))[0]
+
+        assert asyncio.run(revise_async("secret")).model_version == 3
+        with pytest.raises(ShieldAPIError, match="401 unauthorized"):
+            asyncio.run(revise_async("wrong"))
+    finally:
+        server.stop()
 
 
 def test_the_websocket_session_names_each_error_and_stays_in_step(tmp_path: Path) -> None:
