@@ -15,11 +15,9 @@ weights, bit for bit, once they have taken all their steps.
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import platform
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -34,31 +32,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.learner import CONFIG, fill  # noqa: E402
+from bench.versions import load_package  # noqa: E402
 from client.agents import ddpg as this_ddpg  # noqa: E402
 from client.agents import ensemble as this_ensemble  # noqa: E402
 
 SIZES = (1, 5, 10)
-
-
-def load_agents(commit: str, directory: Path) -> ModuleType:
-    """``client/agents`` as it was at ``commit``, as a package of its own whose modules
-    import each other, not this checkout's."""
-    def git(*args: str) -> str:
-        return subprocess.run(["git", *args], cwd=ROOT, check=True, capture_output=True,
-                              text=True).stdout
-
-    name = f"agents_{commit}"
-    package = directory / name
-    package.mkdir()
-    for path in git("ls-tree", "--name-only", f"{commit}:client/agents").split():
-        if path.endswith(".py"):
-            source = git("show", f"{commit}:client/agents/{path}")
-            (package / path).write_text(source.replace("client.agents.", f"{name}."))
-    sys.path.insert(0, str(directory))
-    agents = importlib.import_module(name)
-    for module in ("ddpg", "ensemble"):
-        importlib.import_module(f"{name}.{module}")
-    return agents
 
 
 def block_ms(learner: Any, obs: np.ndarray, steps: int) -> float:
@@ -122,7 +100,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     with tempfile.TemporaryDirectory() as directory:
-        other = load_agents(args.commit, Path(directory))
+        other = load_package(args.commit, "client/agents", Path(directory))
         results: dict[str, Any] = {
             "machine": platform.machine(), "processor": platform.processor(),
             "python": platform.python_version(), "torch": torch.__version__,
