@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import statistics
 import sys
 import tempfile
 import time
@@ -32,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.learner import CONFIG, fill  # noqa: E402
-from bench.versions import load_package  # noqa: E402
+from bench.versions import load_package, paired, table_row  # noqa: E402
 from client.agents import ddpg as this_ddpg  # noqa: E402
 from client.agents import ensemble as this_ensemble  # noqa: E402
 
@@ -66,11 +65,7 @@ def compare(learners: dict[str, Any], obs: np.ndarray, rounds: int,
             times[name].append(block_ms(learners[name], obs, steps))
     identical = all(torch.equal(x, y) for x, y in zip(
         weights(learners["other"]), weights(learners["this"]), strict=True))
-    return {"other_ms": statistics.median(times["other"]),
-            "this_ms": statistics.median(times["this"]),
-            "speed_up": statistics.median(o / t for o, t in zip(times["other"], times["this"],
-                                                                strict=True)),
-            "rounds": times, "identical": identical}
+    return {**paired(times["other"], times["this"]), "identical": identical}
 
 
 def separate(other: ModuleType, rounds: int, steps: int) -> dict[str, Any]:
@@ -116,8 +111,7 @@ def main() -> None:
         for label, measure in rows:
             row = measure()
             results["learners"][label] = row
-            print(f"| {label} | {row['other_ms']:.2f} | {row['this_ms']:.2f} | "
-                  f"{row['speed_up']:.2f}x | {'yes' if row['identical'] else 'no'} |")
+            print(table_row(label, row, row["identical"]))
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
 

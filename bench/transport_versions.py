@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import statistics
 import sys
 import tempfile
 import time
@@ -37,7 +36,7 @@ import client.shield as this_shield  # noqa: E402
 from app.service import codec  # noqa: E402
 from bench.core_step import build, steps, variant  # noqa: E402
 from bench.service import SEED, free_port, start  # noqa: E402
-from bench.versions import load_package  # noqa: E402
+from bench.versions import load_package, paired, table_row  # noqa: E402
 
 MODELS = 10  # a lockstep round: a step of each run's model
 
@@ -118,14 +117,10 @@ def main() -> None:
           f"| same decisions |")
     print("|---|---:|---:|---:|---|")
     for kind, t in times.items():
-        row = {"other_ms": statistics.median(t["other"]) * 1e3,
-               "this_ms": statistics.median(t["this"]) * 1e3,
-               "speed_up": statistics.median(o / n for o, n in zip(t["other"], t["this"],
-                                                                   strict=True)),
-               "rounds_s": t, "same": decisions[kind]["other"] == decisions[kind]["this"]}
+        same = decisions[kind]["other"] == decisions[kind]["this"]
+        row = {**paired(t["other"], t["this"], unit=1e3), "same": same}
         results["kinds"][kind] = row
-        print(f"| {kind} | {row['other_ms']:.2f} | {row['this_ms']:.2f} | "
-              f"{row['speed_up']:.2f}x | {'yes' if row['same'] else 'no'} |")
+        print(table_row(kind, row, same))
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
 

@@ -4,10 +4,12 @@
 from __future__ import annotations
 
 import importlib
+import statistics
 import subprocess
 import sys
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -37,3 +39,18 @@ def load_package(commit: str, path: str, directory: Path) -> ModuleType:
         if module != "__init__":
             importlib.import_module(f"{name}.{module}")
     return loaded
+
+
+def paired(other: list[float], this: list[float], unit: float = 1.0) -> dict[str, Any]:
+    """Each commit's median over rounds (times ``unit``) and the median of the rounds'
+    ratios, other over this: the speed-up of this checkout."""
+    return {"other_ms": statistics.median(other) * unit,
+            "this_ms": statistics.median(this) * unit,
+            "speed_up": statistics.median(o / t for o, t in zip(other, this, strict=True)),
+            "rounds": {"other": other, "this": this}}
+
+
+def table_row(label: str, row: dict[str, Any], same: bool) -> str:
+    """A Markdown row of :func:`paired`'s result and whether both commits gave the same."""
+    return (f"| {label} | {row['other_ms']:.2f} | {row['this_ms']:.2f} | "
+            f"{row['speed_up']:.2f}x | {'yes' if same else 'no'} |")
