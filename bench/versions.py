@@ -1,5 +1,5 @@
-"""A package of this repository as it was at another commit, beside this checkout's: the
-``*_versions.py`` benchmarks time both in one process."""
+"""A package of this repository as it was at another commit, beside this checkout's, and the
+paired medians of the two: the ``*_versions.py`` benchmarks time both in one process."""
 
 from __future__ import annotations
 
