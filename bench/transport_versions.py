@@ -50,20 +50,25 @@ def upload(base: str, names: list[str]) -> None:
             response.raise_for_status()
 
 
-def single(shield: ModuleType, base: str, who: str, block: int,
-           seed: int) -> list[Callable[[], Any]]:
+def single(shield: ModuleType, base: str, who: str) -> Callable[[int, int], list[Any]]:
+    """One client for every round: each call gives a block's single-step requests."""
     client = shield.ShieldClient(base, model=f"{who}-single")
-    return [lambda z=z, a=a: client.revise(z, a, stream="bench")
-            for z, a in steps(block, seed, "inspect")]
+    return lambda block, seed: [lambda z=z, a=a: client.revise(z, a, stream="bench")
+                                for z, a in steps(block, seed, "inspect")]
 
 
-def batch(shield: ModuleType, base: str, who: str, block: int,
-          seed: int) -> list[Callable[[], Any]]:
+def batch(shield: ModuleType, base: str, who: str) -> Callable[[int, int], list[Any]]:
+    """One carrier for every round: each call gives a block's batch requests."""
     carrier = shield.BatchShield(base)
     body = shield.remote.step_body
-    work = [steps(block, seed + 1000 * k, "inspect") for k in range(MODELS)]
-    return [lambda i=i: carrier.revise_many([(f"{who}-{k}", body(*work[k][i], stream="bench"))
-                                             for k in range(MODELS)]) for i in range(block)]
+
+    def block_of(block: int, seed: int) -> list[Callable[[], Any]]:
+        work = [steps(block, seed + 1000 * k, "inspect") for k in range(MODELS)]
+        return [lambda i=i: carrier.revise_many(
+            [(f"{who}-{k}", body(*work[k][i], stream="bench")) for k in range(MODELS)])
+            for i in range(block)]
+
+    return block_of
 
 
 def main() -> None:
@@ -90,11 +95,12 @@ def main() -> None:
                                                         for k in kinds}
             decisions: dict[str, dict[str, list[Any]]] = {k: {"other": [], "this": []}
                                                           for k in kinds}
+            requests = {kind: {who: make(clients[who], base, who) for who in clients}
+                        for kind, (make, _) in kinds.items()}
             for r in range(args.rounds):
                 order = ("other", "this") if r % 2 == 0 else ("this", "other")
-                for kind, (make, size) in kinds.items():
-                    calls = {who: make(clients[who], base, who, size, SEED + r)
-                             for who in order}
+                for kind, (_, size) in kinds.items():
+                    calls = {who: requests[kind][who](size, SEED + r) for who in order}
                     spent = dict.fromkeys(order, 0.0)
                     for i in range(size):  # request by request: a drift falls on both
                         for who in order:
