@@ -77,6 +77,9 @@ class Candidate(BaseModel):
     action: float = Field(description="The bin's midpoint (m/s²).")
     bin: int = Field(description="The action bin, 0 = hardest braking.")
     verdict: str = Field(description="'ok' or the criterion predicted for it.")
+    risk: dict[str, float] | None = Field(
+        default=None, description="The risk reviser's probability of each failure within its "
+        "horizon for this action; null for the paper's reviser.")
 
 
 class Decision(BaseModel):
@@ -89,7 +92,9 @@ class Decision(BaseModel):
     reason: str = Field(description="pass, revised_safety, revised_speed, inactive, "
                         "cold_start or done.")
     verdict: str = Field(description="What inspecting the proposed action found.")
-    risk: dict[str, float] = Field(description="Predicted probability mass per criterion.")
+    risk: dict[str, float] = Field(description="The proposed action's risk per criterion: the "
+                                   "probability of that failure within the horizon (risk "
+                                   "reviser) or the predicted mass on flagged states (paper).")
     threshold: float | None = Field(description="Alg. 1's adaptive threshold for the "
                                     "proposed action; null when nothing was inspected.")
     candidates: list[Candidate] = Field(description="Actions inspected while revising.")
@@ -119,13 +124,15 @@ class ModelCreate(BaseModel):
     config: dict[str, Any] = Field(
         default_factory=dict,
         description="Overrides of the paper's car-following configuration: observation "
-        "(names, low, high, knee, knee_shape), action (low, high, step, out_of_range), criteria "
-        "([{name, direction}]), clustering (rho, epsilon, creation_rule, spread, "
-        "min_variance, failure_states), "
+        "(names, low, high, knee, knee_shape, features, cluster_raw), "
+        "action (low, high, step, out_of_range), criteria ([{name, direction}]), "
+        "clustering (rho, epsilon, creation_rule, spread, min_variance, failure_states), "
         "transitions (learning_rate, prior, on_new_state, expansion, action_source, "
         "across_episodes, on_replace), reviser (activate_after_episodes, noise_k, noise, "
         "horizon, transpose, inspect, search, multi_step, flags, flag_min_rate, flag_rate_per, "
-        "failure_centres, one_sided, noise_side, seed), "
+        "failure_centres, one_sided, noise_side, seed, method: risk or paper), "
+        "risk (horizon, threshold, margin, prior_safe, refresh_steps, precursor_steps, "
+        "precursor_spacing), "
         "limits (max_states, belief_top_k, tpm_backend).",
         examples=[{"clustering": {"epsilon": 0.1}, "reviser": {"seed": 7}}],
     )

@@ -172,6 +172,17 @@ class EvolvingClusterer:
         self._accumulate(z, theta)
         return update
 
+    def add_centre(self, z: FloatArray) -> int | None:
+        """Make ``z`` a state of its own (unless ``max_states`` is reached), with the potential
+        it has among the samples so far; the samples themselves are unchanged."""
+        if self._n >= self.max_states:
+            self.capacity_hits += 1
+            return None
+        k = self.k + 1
+        theta = float(z @ z)
+        potential = (k - 1) / ((k - 1) * (theta + 1.0) + self.sigma - 2.0 * float(z @ self.beta))
+        return self._add(z, potential=potential if k > 1 else 1.0)
+
     def _add(self, z: FloatArray, potential: float) -> int:
         n = self._n
         limit = self.max_states

@@ -25,6 +25,33 @@ def _check(ok: bool, field_name: str, message: str) -> None:
 
 
 @dataclass(frozen=True)
+class Feature:
+    """A derived dimension of the observation x that the states are found in.
+
+    Its value is ``w . x``, or the ratio ``(w . x) / max(d . x, floor)`` when ``divide_by``
+    (d) is given: a closing speed is ``v_lead - v_ego`` (weights ``(-1, 0, 1)``); a time
+    headway is ``headway / max(v_ego, 1 m/s)``. The value is clipped to ``[low, high]`` and
+    scaled by that range like every other dimension, so a feature that grows without bound
+    near a limit (a ratio) cannot dominate the distances.
+    """
+
+    name: str
+    weights: tuple[float, ...]
+    low: float
+    high: float
+    divide_by: tuple[float, ...] = ()
+    floor: float = 1.0
+
+    def __post_init__(self) -> None:
+        _check(bool(self.name), "name", "a feature needs a name")
+        _check(all(math.isfinite(w) for w in self.weights + self.divide_by), "weights",
+               "weights must be finite")
+        _check(math.isfinite(self.low) and math.isfinite(self.high) and self.high > self.low,
+               "high", "high must be finite and exceed low")
+        _check(math.isfinite(self.floor) and self.floor > 0, "floor", "floor must be positive")
+
+
+@dataclass(frozen=True)
 class ObservationSpec:
     """The e-FSM observation z_t (Eq. 12) and the bounds that normalise it.
 
@@ -52,6 +79,9 @@ class ObservationSpec:
     knee: tuple[float, ...] = (0.0, 20.0, 0.0)  # [m/s, m, m/s]; empty or one per name
     knee_shape: Literal["log", "double"] = "double"
 
+    features: tuple[Feature, ...] = ()
+    cluster_raw: bool = True  # cluster the (scaled) observation itself beside the features
+
     def __post_init__(self) -> None:
         _check(len(self.names) >= 1, "names", "at least one observation dimension is needed")
         _check(len(set(self.names)) == len(self.names), "names", "names must be unique")
@@ -64,6 +94,16 @@ class ObservationSpec:
                "knee is empty or one per name (the default is for the paper's three names)")
         _check(all(math.isfinite(k) and k >= 0 for k in self.knee), "knee",
                "every knee is finite and >= 0")
+        for i, feature in enumerate(self.features):
+            _check(len(feature.weights) == len(self.names), f"features.{i}.weights",
+                   "a feature needs one weight per observation name")
+            _check(len(feature.divide_by) in (0, len(self.names)), f"features.{i}.divide_by",
+                   "divide_by is empty or one weight per observation name")
+        _check(self.cluster_raw or bool(self.features), "cluster_raw",
+               "without the raw observation, at least one feature is needed")
+        names = list(self.names) + [f.name for f in self.features]
+        _check(len(set(names)) == len(names), "features", "feature names must be unique "
+               "and differ from the observation's names")
 
     @property
     def size(self) -> int:
@@ -169,8 +209,15 @@ class TransitionConfig:
 
 @dataclass(frozen=True)
 class ReviserConfig:
-    """The action reviser, Algs. 1-3, and its exploration noise (spec §10-13)."""
+    """The action reviser, Algs. 1-3, and its exploration noise (spec §10-13).
 
+    ``method`` ``paper`` (the default) revises by the paper's flags on predicted states, with
+    every switch below; ``risk`` by the failure risk of each action over a horizon
+    (:class:`RiskConfig`, :mod:`app.core.risk`), which has not yet beaten it where defaults
+    are chosen (docs/risk-reviser.md). ``activate_after_episodes`` and ``seed`` serve both.
+    """
+
+    method: Literal["paper", "risk"] = "paper"
     activate_after_episodes: int = 50  # xi
     noise_k: float = 0.001  # K
     noise: Literal["variance", "std"] = "variance"  # A7: V = a_max / max(1, K * episode)
@@ -225,6 +272,40 @@ class ReviserConfig:
 
 
 @dataclass(frozen=True)
+class RiskConfig:
+    """The failure-aware reviser (:mod:`app.core.risk`).
+
+    An action is kept when its risk (the probability, summed over criteria, of a failure
+    within ``horizon`` steps under the safest known continuation) is at most ``threshold`` or
+    within ``margin`` of the safest action's; otherwise the nearest allowed action replaces
+    it. ``prior_safe`` is the number of safe pseudo-tries every (state, action) starts with.
+    The risk table is rebuilt at every episode end and after ``refresh_steps`` steps.
+
+    ``precursor_steps``: at a failure, the stream's last observations before it become
+    states of their own where no state lies within ``precursor_spacing`` x epsilon, so that the
+    model is fine where outcomes differ and coarse elsewhere (bounded by ``max_states``).
+    """
+
+    horizon: int = 8
+    threshold: float = 0.05
+    margin: float = 0.02
+    prior_safe: float = 1.0
+    refresh_steps: int = 500
+    precursor_steps: int = 0
+    precursor_spacing: float = 0.5
+
+    def __post_init__(self) -> None:
+        _check(1 <= self.horizon <= 256, "horizon", "horizon lies in [1, 256]")
+        _check(0.0 <= self.threshold <= 1.0, "threshold", "threshold lies in [0, 1]")
+        _check(0.0 <= self.margin <= 1.0, "margin", "margin lies in [0, 1]")
+        _check(math.isfinite(self.prior_safe) and self.prior_safe > 0, "prior_safe",
+               "must be positive")
+        _check(1 <= self.refresh_steps <= 10**9, "refresh_steps", "lies in [1, 1e9]")
+        _check(0 <= self.precursor_steps <= 64, "precursor_steps", "lies in [0, 64]")
+        _check(0.0 < self.precursor_spacing <= 10.0, "precursor_spacing", "lies in (0, 10]")
+
+
+@dataclass(frozen=True)
 class LimitsConfig:
     """Bounds that keep the cost of a step flat as the model grows.
 
@@ -253,6 +334,7 @@ class ShieldConfig:
     clustering: ClusteringConfig = field(default_factory=ClusteringConfig)
     transitions: TransitionConfig = field(default_factory=TransitionConfig)
     reviser: ReviserConfig = field(default_factory=ReviserConfig)
+    risk: RiskConfig = field(default_factory=RiskConfig)
     limits: LimitsConfig = field(default_factory=LimitsConfig)
 
     def __post_init__(self) -> None:

@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from app.core import actions, reviser
+from app.core import actions, reviser, risk
+from app.core._arrays import ensure_capacity
 from app.core.belief import Belief, recognise
 from app.core.clustering import EvolvingClusterer
 from app.core.config import ShieldConfig
@@ -34,16 +35,18 @@ from app.core.lazy_tpm import LazyTransitions
 from app.core.tpm import DenseTransitions, TransitionModel
 
 FloatArray = npt.NDArray[np.float64]
-SNAPSHOT_FORMAT = 2
+SNAPSHOT_FORMAT = 3
 
 
 @dataclass(frozen=True)
 class Candidate:
-    """An action the reviser inspected: the bin's midpoint, the bin, and its verdict."""
+    """An action the reviser inspected: the bin's midpoint, the bin, its verdict and (for the
+    risk reviser) its risk per criterion."""
 
     action: float
     bin: int
     verdict: str
+    risk: dict[str, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -91,6 +94,7 @@ class StreamState:
     applied_bin: int = 0
     proposed_bin: int = 0
     step: int = 0
+    recent: list[FloatArray] = field(default_factory=list)  # the last normalised observations
 
 
 @dataclass
@@ -114,6 +118,16 @@ class Shield:
                 "on_replace='reset' needs the lazy TPM backend", field="transitions.on_replace"
             )
         self._dim = cfg.observation.size
+        features = cfg.observation.features
+        self._feature_w = np.array([f.weights for f in features]).reshape(-1, self._dim)
+        self._feature_d = np.array([f.divide_by or (0.0,) * self._dim for f in features]
+                                   ).reshape(-1, self._dim)
+        self._feature_ratio = np.array([bool(f.divide_by) for f in features], dtype=bool)
+        self._feature_floor = np.array([f.floor for f in features], dtype=np.float64)
+        self._feature_low = np.array([f.low for f in features], dtype=np.float64)
+        self._feature_range = np.array([f.high - f.low for f in features], dtype=np.float64)
+        self._raw = cfg.observation.cluster_raw
+        self._zdim = self._dim * self._raw + len(features)
         knee = np.array(cfg.observation.knee or [0.0] * self._dim)
         self._curved = knee > 0 if knee.any() else None  # the dimensions with a knee
         self._knee = np.where(knee > 0, knee, 1.0)
@@ -128,11 +142,15 @@ class Shield:
     def reset(self) -> None:
         """Forget everything: no states, no streams, counters at zero, the seed's generator."""
         cfg = self.config
-        self.clusterer = EvolvingClusterer(cfg.clustering, self._dim, cfg.limits.max_states)
+        self.clusterer = EvolvingClusterer(cfg.clustering, self._zdim, cfg.limits.max_states)
         self.transitions: TransitionModel = self._new_transitions()
         self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria),
                                 cfg.reviser.flag_min_rate, cfg.reviser.flag_rate_per,
                                 cfg.reviser.failure_centres)
+        self.outcomes = risk.OutcomeCounts(cfg.action.n_bins, len(cfg.criteria),
+                                           cfg.limits.max_states)
+        self._risk_table = np.zeros((0, cfg.action.n_bins, len(cfg.criteria)))
+        self._risk_version = 0  # the outcome counts' version the table was built from
         self.streams: dict[str, StreamState] = {}
         self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria})
         self._rng = np.random.default_rng(cfg.reviser.seed)
@@ -151,12 +169,31 @@ class Shield:
 
     def normalise(self, observation: FloatArray) -> FloatArray:
         """Physical units to the clustering space: ``(z - low) / (high - low)``, z and low
-        through their dimension's knee first (and high too, for the log knee)."""
-        z: FloatArray = (self._warp(observation) - self._low) / self._range
+        through their dimension's knee first (and high too, for the log knee), followed by the
+        configured features, each clipped to its range and scaled by it."""
+        parts = []
+        if self._raw:
+            parts.append((self._warp(observation) - self._low) / self._range)
+        if self._feature_w.shape[0]:
+            value = self._feature_w @ observation
+            divisor = np.maximum(self._feature_d @ observation, self._feature_floor)
+            value = np.where(self._feature_ratio, value / divisor, value)
+            lifted = (value - self._feature_low) / self._feature_range
+            parts.append(np.clip(lifted, 0.0, 1.0))
+        z: FloatArray = parts[0] if len(parts) == 1 else np.concatenate(parts)
         return z
 
     def physical(self, z: FloatArray) -> FloatArray:
-        """The clustering space back to physical units (the inverse of :meth:`normalise`)."""
+        """The clustering space back to physical units: the observation (the inverse of
+        :meth:`normalise`) where it is clustered, then each feature's value."""
+        n_raw = self._dim if self._raw else 0
+        features = self._feature_low + z[..., n_raw:] * self._feature_range
+        if not self._raw:
+            return features
+        raw = self._raw_physical(z[..., :n_raw])
+        return np.concatenate([raw, features], axis=-1) if features.shape[-1] else raw
+
+    def _raw_physical(self, z: FloatArray) -> FloatArray:
         warped = self._low + z * self._range
         if self._curved is None:
             return warped
@@ -285,8 +322,7 @@ class Shield:
         # §2.4 clustering: a new state expands every TPM (§8)
         update = self.clusterer.learn_one(z, failure=step.event is not None)
         if update.is_new:
-            self.transitions.add_state()
-            self.flags.add_state()
+            self._add_state()
         elif update.kind == "replaced" and cfg.transitions.on_replace == "reset":
             self.transitions.reset_row(update.index)  # A16
         if update.kind != "assigned":  # the observation is a centre now
@@ -299,6 +335,7 @@ class Shield:
         self._learn_transition(state, belief, update.is_new, step.applied_action)
         # §5 flags on the recognised state
         recognised = belief.argmax()
+        self._learn_outcome(state, recognised, step)
         entered = state.belief is None or state.belief.argmax() != recognised
         self.flags.observe(recognised, step.event, entered)
         self.counters.steps += 1
@@ -306,6 +343,7 @@ class Shield:
 
         if step.done:
             self.counters.episodes += 1
+            self._refresh_risk()
             closing = self._closing(step, recognised, update.is_new, state.step)
             if cfg.transitions.across_episodes:  # A13 literal: the next reset is learned
                 state.belief, state.step = belief, 0
@@ -313,15 +351,58 @@ class Shield:
                 del self.streams[step.stream]
             return closing
 
+        if self.outcomes.version - self._risk_version >= cfg.risk.refresh_steps:
+            self._refresh_risk()
         decision = self._decide(step, belief, recognised, update.is_new, state.step, self._rng)
         assert decision.action is not None and step.action is not None
         state.belief = belief
+        if cfg.risk.precursor_steps:
+            state.recent = [*state.recent[1 - cfg.risk.precursor_steps:], z]
         state.applied_bin = actions.encode(decision.action, cfg.action)
         state.proposed_bin = actions.encode(step.action, cfg.action)
         state.step += 1
         if decision.revised and not decision.shadow:
             self.counters.interventions[decision.verdict] += 1
         return decision
+
+    def _add_state(self) -> None:
+        """A state was created: every per-state table grows by one (§8)."""
+        self.transitions.add_state()
+        self.flags.add_state()
+        self.outcomes.add_state()
+        n = self.n_states
+        self._risk_table = ensure_capacity(self._risk_table, n, self.config.limits.max_states)
+
+    def _learn_outcome(self, state: StreamState, recognised: int, step: StepInput) -> None:
+        """Count what the stream's previous action led to: the recognised state, or the
+        failure of this step's event (an absorbing outcome); then, at a failure, give the
+        observations that preceded it states of their own (:class:`RiskConfig`)."""
+        if state.belief is None:
+            return
+        action_bin = (state.applied_bin if step.applied_action is None
+                      else actions.encode(step.applied_action, self.config.action))
+        previous = state.belief.argmax()
+        if step.event is None:
+            self.outcomes.learn_move(previous, action_bin, recognised)
+            return
+        self.outcomes.learn_failure(previous, action_bin, step.event)
+        spacing = (self.config.risk.precursor_spacing * self.config.clustering.epsilon) ** 2
+        for z in reversed(state.recent):
+            if self.clusterer.sq_distances(z).min() > spacing:
+                if self.clusterer.add_centre(z) is None:
+                    break
+                self._add_state()
+
+    def _refresh_risk(self) -> None:
+        """Rebuild the risk table from the outcome counts (:func:`risk.horizon_risk`)."""
+        cfg = self.config
+        n = self.n_states
+        if cfg.reviser.method != "risk" or n == 0:
+            return
+        self._risk_table[:n] = risk.horizon_risk(
+            self.outcomes.tries, self.outcomes.failures, self.outcomes.moves(),
+            self._directions, cfg.risk.horizon, cfg.risk.prior_safe)
+        self._risk_version = self.outcomes.version
 
     def _learn_transition(
         self, state: StreamState, belief: Belief, is_new: bool, applied: float | None
@@ -404,6 +485,8 @@ class Shield:
             episode=self.counters.episodes, step=index,
             model_version=self.counters.model_version, stream=step.stream, shadow=step.shadow,
         )
+        if cfg.reviser.method == "risk":
+            return self._decide_by_risk(step, belief, common)
         if flagged[0].size == 0:
             return Decision(action=proposed, revised=False, reason="cold_start", verdict="ok",
                             risk=self._risk(None), threshold=None, candidates=(),
@@ -438,6 +521,50 @@ class Shield:
         return Decision(
             action=proposed if step.shadow else revised, revised=True, reason=reason,
             candidates=candidates, suggested=revised, **record, **common,  # type: ignore[arg-type]
+        )
+
+    def _decide_by_risk(self, step: StepInput, belief: Belief,
+                        common: dict[str, Any]) -> Decision:
+        """The risk reviser (:mod:`app.core.risk`): keep the proposal unless its risk is over
+        the threshold and beyond the margin of the safest action; then the nearest allowed."""
+        cfg = self.config
+        proposed = step.action
+        assert proposed is not None
+        if not self.outcomes.any_failure:
+            return Decision(action=proposed, revised=False, reason="cold_start", verdict="ok",
+                            risk=self._risk(None), threshold=None, candidates=(),
+                            suggested=proposed, **common)
+        by_bin = risk.belief_risk(self._risk_table[: self.n_states], belief)
+        total = by_bin.sum(axis=1)
+        start = actions.encode(proposed, cfg.action)
+        limit = max(cfg.risk.threshold, float(total.min()) + cfg.risk.margin)
+        names = [c.name for c in cfg.criteria]
+
+        def named(r: int) -> dict[str, float]:
+            return {name: float(v) for name, v in zip(names, by_bin[r], strict=True)}
+
+        worst = int(by_bin[start].argmax())
+        active = self.counters.episodes >= cfg.reviser.activate_after_episodes
+        if total[start] <= limit or not active:
+            reason = "pass" if active else "inactive"
+            verdict = "ok" if total[start] <= limit else names[worst]
+            return Decision(action=proposed, revised=False, reason=reason, verdict=verdict,
+                            risk=named(start), threshold=limit, candidates=(),
+                            suggested=proposed, **common)
+        safe_step = -1 if self._directions[worst] == "decrease" else 1
+        final = risk.choose(total, start, cfg.risk.threshold, cfg.risk.margin, safe_step)
+        way = 1 if final > start else -1
+        candidates = tuple(
+            Candidate(actions.decode(r, cfg.action), r,
+                      "ok" if total[r] <= limit else names[int(by_bin[r].argmax())], named(r))
+            for r in range(start + way, final + way, way)
+        )
+        revised = actions.decode(final, cfg.action)
+        reason = "revised_safety" if final < start else "revised_speed"
+        return Decision(
+            action=proposed if step.shadow else revised, revised=True, reason=reason,
+            verdict=names[worst], risk=named(start), threshold=limit, candidates=candidates,
+            suggested=revised, **common,
         )
 
     def _verdict_name(self, verdict: int) -> str:
@@ -500,6 +627,9 @@ class Shield:
             "clustering": self.clusterer.snapshot(),
             "transitions": self.transitions.snapshot(),
             "flags": self.flags.snapshot(),
+            "outcomes": self.outcomes.snapshot(),
+            "risk": {"table": self._risk_table[: self.n_states].copy(),
+                     "version": self._risk_version},
             "streams": {
                 name: {
                     "index": None if s.belief is None else s.belief.index.copy(),
@@ -507,6 +637,7 @@ class Shield:
                     "applied_bin": s.applied_bin,
                     "proposed_bin": s.proposed_bin,
                     "step": s.step,
+                    "recent": [z.copy() for z in s.recent],
                 }
                 for name, s in self.streams.items()
             },
@@ -515,7 +646,7 @@ class Shield:
     @classmethod
     def from_snapshot(cls, data: dict[str, Any]) -> Shield:
         """Rebuild a shield that makes exactly the decisions the original would make."""
-        if not isinstance(data, dict) or data.get("format") != SNAPSHOT_FORMAT:
+        if not isinstance(data, dict) or data.get("format") not in (2, SNAPSHOT_FORMAT):
             raise InvalidSnapshot(f"expected snapshot format {SNAPSHOT_FORMAT}", field="format")
         try:
             return cls._restore(data)
@@ -551,14 +682,38 @@ class Shield:
         n = self.clusterer.n_states
         if self.transitions.n_states != n or self.flags.flags.shape[0] != n:
             raise InvalidSnapshot("states, matrices and flags disagree on the state count")
+        self._restore_risk(data, n)
         self.streams = {}
         for name, s in data["streams"].items():
             belief = None
             if s["index"] is not None:
                 belief = Belief(np.array(s["index"], dtype=np.int64),
                                 np.array(s["prob"], dtype=np.float64))
+            recent = [np.array(z, dtype=np.float64).reshape(self._zdim)
+                      for z in s.get("recent", [])]
             self.streams[str(name)] = StreamState(
-                belief, int(s["applied_bin"]), int(s["proposed_bin"]), int(s["step"])
+                belief, int(s["applied_bin"]), int(s["proposed_bin"]), int(s["step"]), recent
             )
         return self
+
+    def _restore_risk(self, data: dict[str, Any], n: int) -> None:
+        """The outcome counts and the risk table; a format-2 snapshot (from before the risk
+        reviser) has neither and starts them empty."""
+        cfg = self.config
+        q, n_c = cfg.action.n_bins, len(cfg.criteria)
+        if data["format"] == 2:
+            for _ in range(n):
+                self.outcomes.add_state()
+            self._risk_table = np.zeros((n, q, n_c))
+            return
+        self.outcomes = risk.OutcomeCounts.restore(q, n_c, cfg.limits.max_states,
+                                                   data["outcomes"])
+        table = np.array(data["risk"]["table"], dtype=np.float64)
+        if self.outcomes.n_states != n or table.shape != (n, q, n_c):
+            raise InvalidSnapshot("outcomes, risk table and states disagree on their sizes",
+                                  field="risk")
+        if not (np.isfinite(table).all() and (table >= 0).all() and (table <= 1).all()):
+            raise InvalidSnapshot("risks must be probabilities", field="risk.table")
+        self._risk_table = table
+        self._risk_version = int(data["risk"]["version"])
 

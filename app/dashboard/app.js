@@ -251,7 +251,7 @@ function drawDecisions() {
   $("decisions").tBodies[0].innerHTML = rows.map((d) => `<tr><td>${d.episode}:${d.step}</td>`
     + `<td>${number(d.proposed)}</td><td class="${d.revised ? "revised" : ""}">${number(d.action)}</td>`
     + `<td>${d.reason}</td><td>${Object.entries(d.risk).map(([k, v]) => `${k} ${number(v)}`).join(", ")}</td>`
-    + `<td>${number(d.threshold)}</td><td>${d.candidates.map((c) => `${c.bin}:${c.verdict}`).join(" ")}</td></tr>`).join("");
+    + `<td>${number(d.threshold)}</td><td>${d.candidates.map((c) => `${c.bin}:${c.verdict}${c.risk ? ` (${number(Object.values(c.risk).reduce((a, b) => a + b, 0))})` : ""}`).join(" ")}</td></tr>`).join("");
 }
 
 function renderConfig() {

@@ -1,0 +1,247 @@
+"""Failure-aware risk per action over a horizon: the shield's default reviser.
+
+The paper flags *states* where a failure was seen and steers away from them. That attaches a
+failure to the wrong thing: a crash in a state happened under an action, and braking there a
+thousand times without a crash says nothing about accelerating there. This module keeps, per
+(state, action bin), how often the action was applied, where it led and which failures it ended
+in, and turns those counts into the probability of each failure within H steps:
+
+* **Outcomes.** ``p_c(s, a) = F_c(s, a) / (N(s, a) + beta)`` is the posterior mean of failure
+  ``c`` under a prior of ``beta`` safe pseudo-tries (so one failure in one try reads 1 / (1 +
+  beta), and the estimate shrinks only as *that* action is tried there again);
+  ``P(j | s, a) = T(s, a, j) / (N(s, a) + beta)`` the move to state ``j``.
+* **Horizon.** Finite-horizon value iteration, as probabilistic shields compute it:
+  ``Q_h(s, a) = p(s, a) + sum_j P(j | s, a) V_{h-1}(j)`` with ``V_h(s) = Q_h(s, a*)`` for the
+  tried action ``a*`` of least total risk (the safest known continuation), ``V_0 = 0``.
+* **Monotone prior.** Each criterion has a safe direction: braking harder never raises the risk
+  of a collision, speeding up never raises the risk of falling behind. So the risk of an action
+  is at least that of every action on its safe side: ``Q`` is replaced by its running maximum
+  from the safe end of the action range, which also gives an action never tried in a state the
+  risk of the nearest tried one on its safe side.
+
+The table ``Q`` (states x actions x criteria) is refreshed at episode ends and every
+``refresh_steps`` steps; a step only reads it: ``risk(a) = sum_i belief_i Q(i, a)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from app.core._arrays import ensure_capacity
+from app.core.belief import Belief
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+class OutcomeCounts:
+    """Per (state, action bin): tries, failures per criterion, and moves to each next state.
+
+    Moves are sparse: one entry per (state, action, next state) seen, found through a dict, so
+    a model of thousands of states stores only the transitions that happened.
+    """
+
+    def __init__(self, n_actions: int, n_criteria: int, max_states: int) -> None:
+        self.n_actions = n_actions
+        self.n_criteria = n_criteria
+        self.max_states = max_states
+        self._n = 0
+        self._tries = np.zeros((0, n_actions), dtype=np.int64)
+        self._failures = np.zeros((0, n_actions, n_criteria), dtype=np.int64)
+        self._rows = np.zeros(0, dtype=np.int64)  # s * q + a
+        self._cols = np.zeros(0, dtype=np.int64)  # next state j
+        self._moves = np.zeros(0, dtype=np.int64)
+        self._m = 0
+        self._where: dict[int, int] = {}
+        self.version = 0  # counts of steps learned; the risk table compares it
+
+    @property
+    def n_states(self) -> int:
+        """Number of states counted for."""
+        return self._n
+
+    @property
+    def tries(self) -> IntArray:
+        """How often each action was applied in each state, n x q (read-only view)."""
+        return _read_only(self._tries[: self._n])
+
+    @property
+    def failures(self) -> IntArray:
+        """Failures per criterion that each (state, action) ended in, n x q x C (read-only)."""
+        return _read_only(self._failures[: self._n])
+
+    @property
+    def any_failure(self) -> bool:
+        """Whether a failure has been counted at all."""
+        return bool(self._failures[: self._n].any())
+
+    def moves(self) -> tuple[IntArray, IntArray, IntArray]:
+        """The sparse moves: row ``s * q + a``, next state ``j``, count (read-only views)."""
+        m = self._m
+        return (_read_only(self._rows[:m]), _read_only(self._cols[:m]),
+                _read_only(self._moves[:m]))
+
+    def add_state(self) -> None:
+        """A new state starts untried."""
+        n = self._n
+        self._tries = ensure_capacity(self._tries, n + 1, self.max_states)
+        self._failures = ensure_capacity(self._failures, n + 1, self.max_states)
+        self._n = n + 1
+
+    def learn_move(self, state: int, action_bin: int, next_state: int) -> None:
+        """Action ``action_bin`` applied in ``state`` led to ``next_state``."""
+        self._tries[state, action_bin] += 1
+        row = state * self.n_actions + action_bin
+        key = row * self.max_states + next_state
+        at = self._where.get(key)
+        if at is None:
+            at = self._m
+            self._rows = ensure_capacity(self._rows, at + 1, 1 << 62)
+            self._cols = ensure_capacity(self._cols, at + 1, 1 << 62)
+            self._moves = ensure_capacity(self._moves, at + 1, 1 << 62)
+            self._rows[at], self._cols[at] = row, next_state
+            self._where[key] = at
+            self._m = at + 1
+        self._moves[at] += 1
+        self.version += 1
+
+    def learn_failure(self, state: int, action_bin: int, criterion: int) -> None:
+        """Action ``action_bin`` applied in ``state`` ended in a failure of ``criterion``."""
+        self._tries[state, action_bin] += 1
+        self._failures[state, action_bin, criterion] += 1
+        self.version += 1
+
+    def snapshot(self) -> dict[str, Any]:
+        """Exact state as arrays."""
+        rows, cols, moves = self.moves()
+        return {"tries": self.tries.copy(), "failures": self.failures.copy(),
+                "rows": rows.copy(), "cols": cols.copy(), "moves": moves.copy(),
+                "version": self.version}
+
+    @classmethod
+    def restore(cls, n_actions: int, n_criteria: int, max_states: int,
+                data: dict[str, Any]) -> OutcomeCounts:
+        """Rebuild from :meth:`snapshot` output, checking every index and count."""
+        self = cls(n_actions, n_criteria, max_states)
+        tries = _counts(data["tries"])
+        n = tries.shape[0] if tries.ndim == 2 else -1
+        if tries.shape != (n, n_actions) or n > max_states:
+            raise ValueError("outcome tries must be states x actions")
+        failures = _counts(data["failures"]).reshape(n, n_actions, n_criteria)
+        rows = _counts(data["rows"]).ravel()
+        cols = _counts(data["cols"]).ravel()
+        moves = _counts(data["moves"]).ravel()
+        if not rows.shape == cols.shape == moves.shape:
+            raise ValueError("outcome moves disagree on their length")
+        if (tries < 0).any() or (failures < 0).any() or (moves < 1).any():
+            raise ValueError("outcome counts must be non-negative")
+        if rows.size and (rows.min() < 0 or rows.max() >= n * n_actions or cols.min() < 0
+                          or cols.max() >= n):
+            raise ValueError("outcome moves name a state or action out of range")
+        moved = np.zeros(n * n_actions, dtype=np.int64)
+        np.add.at(moved, rows, moves)
+        if (moved.reshape(n, n_actions) + failures.sum(axis=2) != tries).any():
+            raise ValueError("outcome tries are not the sum of moves and failures")
+        self._tries, self._failures, self._n = tries, failures, n
+        self._rows, self._cols, self._moves, self._m = rows, cols, moves, rows.size
+        self._where = {int(r) * max_states + int(c): i
+                       for i, (r, c) in enumerate(zip(rows, cols, strict=True))}
+        if len(self._where) != rows.size:
+            raise ValueError("outcome moves repeat a (state, action, next state)")
+        self.version = int(data["version"])
+        return self
+
+
+def monotone(q_table: FloatArray, directions: Sequence[str]) -> FloatArray:
+    """The running maximum of each criterion's risk from its safe end of the action range.
+
+    ``decrease`` (collision: slower is safer): ``Q(s, a) >= Q(s, a')`` for every ``a' < a``;
+    ``increase`` (falling behind: faster is safer): for every ``a' > a``. An action never
+    tried in a state (risk 0 of its own) so takes the risk of the riskiest tried action on its
+    safe side, the nearest one included.
+    """
+    out = np.empty_like(q_table)
+    for c, direction in enumerate(directions):
+        if direction == "decrease":
+            np.maximum.accumulate(q_table[:, :, c], axis=1, out=out[:, :, c])
+        else:
+            out[:, ::-1, c] = np.maximum.accumulate(q_table[:, ::-1, c], axis=1)
+    return out
+
+
+def horizon_risk(
+    tries: IntArray,
+    failures: IntArray,
+    moves: tuple[IntArray, IntArray, IntArray],
+    directions: Sequence[str],
+    horizon: int,
+    prior_safe: float,
+) -> FloatArray:
+    """``Q_H``: per state, action and criterion, the probability of that failure within
+    ``horizon`` steps when the action is applied now and the safest tried action after.
+
+    >>> tries = np.array([[1, 1], [0, 0]])          # state 0: each of two actions tried once
+    >>> failures = np.array([[[0], [1]], [[0], [0]]])  # action 1 crashed
+    >>> moves = (np.array([0]), np.array([1]), np.array([1]))  # action 0 went to state 1
+    >>> horizon_risk(tries, failures, moves, ["decrease"], 1, 1.0)[0, :, 0].tolist()
+    [0.0, 0.5]
+    """
+    n, q, n_c = failures.shape
+    rows, cols, counts = moves
+    denominator = tries + prior_safe
+    p_fail = failures / denominator[:, :, None]  # posterior mean of each failure
+    p_move = counts / denominator.ravel()[rows]
+    tried = tries > 0
+    value = np.zeros((n, n_c))
+    q_table = monotone(p_fail, directions)
+    for _ in range(horizon - 1):
+        # V(s) = Q(s, a*) for the tried action of least total risk; 0 where nothing was tried
+        total = np.where(tried, q_table.sum(axis=2), np.inf)
+        best = total.argmin(axis=1)
+        value = q_table[np.arange(n), best]
+        value[~tried.any(axis=1)] = 0.0
+        ahead = np.empty((n * q, n_c))
+        for c in range(n_c):
+            ahead[:, c] = np.bincount(rows, weights=p_move * value[cols, c], minlength=n * q)
+        q_table = monotone(p_fail + ahead.reshape(n, q, n_c), directions)
+    return q_table
+
+
+def belief_risk(q_table: FloatArray, belief: Belief) -> FloatArray:
+    """Risk of every action under a belief, actions x criteria: ``sum_i belief_i Q(i)``."""
+    out: FloatArray = np.tensordot(belief.prob, q_table[belief.index], axes=1)
+    return out
+
+
+def choose(total: FloatArray, proposed_bin: int, threshold: float, margin: float,
+           safe_step: int) -> int:
+    """The bin to apply: the proposal when its risk is under ``threshold`` or within
+    ``margin`` of the safest bin; otherwise the allowed bin nearest to it, ties broken
+    towards ``safe_step`` (-1: slower, +1: faster).
+
+    >>> choose(np.array([0.0, 0.01, 0.3, 0.6]), 3, 0.05, 0.02, -1)
+    1
+    """
+    limit = max(threshold, float(total.min()) + margin)
+    if total[proposed_bin] <= limit:
+        return proposed_bin
+    allowed = np.flatnonzero(total <= limit)
+    distance = np.abs(allowed - proposed_bin) * 2 - (np.sign(allowed - proposed_bin) == safe_step)
+    return int(allowed[int(distance.argmin())])
+
+
+def _counts(data: Any) -> IntArray:
+    """Stored counts as int64, refusing anything that is not already whole numbers."""
+    array = np.asarray(data)
+    if array.dtype.kind not in "iu":
+        raise ValueError("outcome counts must be integers")
+    return array.astype(np.int64)
+
+
+def _read_only(view: npt.NDArray[Any]) -> npt.NDArray[Any]:
+    view.flags.writeable = False
+    return view
