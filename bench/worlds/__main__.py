@@ -1,0 +1,63 @@
+"""``python -m bench.worlds``: failures per 100 episodes after the warm-up, with and without
+the shield, on the held-out worlds (none of them was used to choose a default).
+
+Example::
+
+    python -m bench.worlds --seeds 1000,1001,1002 --episodes 150 --out results/worlds/risk.json
+    python -m bench.worlds --overrides '{"reviser": {"method": "paper"}}'
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib
+import json
+import platform
+from pathlib import Path
+
+from app.core import ShieldConfig
+from bench.worlds.harness import compare, summary_line
+
+WORLDS = ("braking_lead", "pendulum", "wall")
+TUNING = {"tuning_idm": "IDM_WORLD", "tuning_random": "RANDOM_WORLD"}
+
+
+def merged(base: ShieldConfig, overrides: dict[str, dict[str, object]]) -> ShieldConfig:
+    """``base`` with each section's fields replaced by ``overrides``."""
+    data = base.to_dict()
+    for section, fields in overrides.items():
+        data[section] = {**data[section], **fields}
+    return ShieldConfig.from_dict(data)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--worlds", default=",".join(WORLDS))
+    parser.add_argument("--seeds", default="1000,1001,1002")
+    parser.add_argument("--episodes", type=int, default=150)
+    parser.add_argument("--warmup", type=int, default=50)
+    parser.add_argument("--overrides", default="{}", help="shield overrides as JSON")
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args()
+    seeds = [int(s) for s in args.seeds.split(",")]
+    overrides = json.loads(args.overrides)
+    results = []
+    for name in args.worlds.split(","):
+        if name in TUNING:
+            world = getattr(importlib.import_module("bench.worlds.tuning"), TUNING[name])
+        else:
+            world = importlib.import_module(f"bench.worlds.{name}").WORLD
+        config = merged(world.config, overrides)
+        result = compare(dataclasses.replace(world, config=config), seeds, args.episodes,
+                         args.warmup)
+        print(summary_line(result), flush=True)
+        results.append(result)
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({"overrides": overrides, "machine": platform.processor()
+                                        or platform.machine(), "results": results}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
