@@ -36,6 +36,9 @@ from app.core.tpm import DenseTransitions, TransitionModel
 
 FloatArray = npt.NDArray[np.float64]
 SNAPSHOT_FORMAT = 3
+# Observations beyond this magnitude are refused: their squares (distances, potentials) would
+# overflow float64 long before they could mean anything physical.
+MAX_MAGNITUDE = 1e12
 
 
 @dataclass(frozen=True)
@@ -272,6 +275,9 @@ class Shield:
             )
         if not np.isfinite(z).all():
             raise InvalidObservation("observation must be finite (no NaN or infinity)",
+                                     field="observation")
+        if (np.abs(z) > MAX_MAGNITUDE).any():
+            raise InvalidObservation(f"observation values must lie within +-{MAX_MAGNITUDE:g}",
                                      field="observation")
         if not isinstance(stream, str) or not 1 <= len(stream) <= 128:
             raise ShieldError("stream must be a string of 1 to 128 characters", field="stream")

@@ -133,6 +133,13 @@ BAD = [
     ("/revise", '{"observation": [1.0, Infinity, 2.0], "action": 0.0}', 422, "invalid_body",
      "observation.1"),
     ("/revise", {"observation": "fast", "action": 0.0}, 422, "invalid_body", "observation"),
+    ("/revise", {"observation": [1.0, 1e160, 2.0], "action": 0.0}, 422, "invalid_observation",
+     "observation"),
+    ("/revise", {"observation": [1.0, 1e160, 2.0], "action": 0.0, "learn": False}, 422,
+     "invalid_observation", "observation"),
+    ("/models/default/revise/batch", {"steps": [STEP, STEP, {**STEP, "observation":
+                                                              [1.0, 2.0, 1e308]}]},
+     422, "invalid_observation", "steps.2.observation"),
     ("/revise", {"observation": [1.0, 2.0, 3.0], "action": "0.5"}, 422, "invalid_body", "action"),
     ("/revise", {"observation": [1.0, 2.0, 3.0], "action": 0.0, "done": "yes"}, 422,
      "invalid_body", "done"),

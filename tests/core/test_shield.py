@@ -106,6 +106,8 @@ BAD_STEPS = [
     (dict(observation=[1.0, math.nan, 2.0], action=0.0), InvalidObservation, "observation"),
     (dict(observation=[1.0, math.inf, 2.0], action=0.0), InvalidObservation, "observation"),
     (dict(observation=["a", 1.0, 2.0], action=0.0), InvalidObservation, "observation"),
+    (dict(observation=[1.0, 1e160, 2.0], action=0.0), InvalidObservation, "observation"),
+    (dict(observation=[-1e300, 1.0, 2.0], action=0.0), InvalidObservation, "observation"),
     (dict(observation=[1.0, 50.0, 2.0], action=math.nan), InvalidAction, "action"),
     (dict(observation=[1.0, 50.0, 2.0], action=None), InvalidAction, "action"),
     (dict(observation=[1.0, 50.0, 2.0], action="fast"), InvalidAction, "action"),
