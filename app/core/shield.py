@@ -674,7 +674,7 @@ class Shield:
         )
         self._rng.bit_generator.state = data["rng"]
         limit = cfg.limits.max_states
-        self.clusterer = EvolvingClusterer.restore(cfg.clustering, self._dim, limit,
+        self.clusterer = EvolvingClusterer.restore(cfg.clustering, self._zdim, limit,
                                                    data["clustering"])
         tpm = data["transitions"]
         if tpm["backend"] == "dense":

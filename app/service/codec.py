@@ -123,8 +123,8 @@ def decision_json(d: Decision) -> dict[str, Any]:
     return {
         "action": d.action, "proposed": d.proposed, "revised": d.revised, "reason": d.reason,
         "verdict": d.verdict, "risk": d.risk, "threshold": d.threshold,
-        "candidates": [{"action": c.action, "bin": c.bin, "verdict": c.verdict}
-                       for c in d.candidates],
+        "candidates": [{"action": c.action, "bin": c.bin, "verdict": c.verdict,
+                        "risk": c.risk} for c in d.candidates],
         "state": d.state, "n_states": d.n_states, "new_state": d.new_state,
         "episode": d.episode, "step": d.step, "model_version": d.model_version,
         "stream": d.stream, "shadow": d.shadow, "suggested": d.suggested,

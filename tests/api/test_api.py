@@ -107,6 +107,26 @@ def test_snapshot_put_restores_a_model_that_decides_alike(client: TestClient) ->
     assert any(d["reason"] == "revised_safety" for d in runs[0])
 
 
+def test_the_risk_reviser_through_the_api(client: TestClient) -> None:
+    config = {"reviser": {"method": "risk", "activate_after_episodes": 1},
+              "risk": {"horizon": 4},
+              "observation": {"features": [{"name": "closing", "weights": [1, 0, -1],
+                                            "low": -10, "high": 10}]}}
+    assert client.post("/models", json={"name": "r", "config": config}).status_code == 201
+    for _ in range(3):
+        episode(client, "/models/r/revise")
+    summary = client.get("/models/r").json()
+    assert summary["exact"]["config"]["risk"]["horizon"] == 4
+    assert client.put("/models/r2", json=summary).status_code == 200
+    runs = [episode(client, f"/models/{m}/revise") for m in ("r", "r2")]
+    assert runs[0] == runs[1]
+    revised = [d for d in runs[0] if d["revised"]]
+    assert revised and revised[0]["reason"] == "revised_safety"
+    assert revised[0]["risk"]["collision"] > 0.0
+    assert all(set(c["risk"]) == {"collision", "large_distance"}
+               for c in revised[0]["candidates"])
+
+
 def test_npz_download_matches_the_core_snapshot(client: TestClient) -> None:
     episode(client)
     blob = client.get("/model", params={"format": "npz"}).content
