@@ -96,7 +96,7 @@ def compare(world: World, seeds: list[int], episodes: int, warmup: int,
 
 def summary_line(result: dict[str, Any]) -> str:
     """One line: failures per 100 episodes after the warm-up, alone and shielded."""
-    per = 100.0 / (result["episodes"] * len(result["seeds"]))
+    per = 100.0 / ((result["episodes"] - result["warmup"]) * len(result["seeds"]))
     alone = Counter[str]()
     shielded = Counter[str]()
     for r in result["runs"]:
