@@ -362,8 +362,8 @@ class Shield:
         decision = self._decide(step, belief, recognised, update.is_new, state.step, self._rng)
         assert decision.action is not None and step.action is not None
         state.belief = belief
-        if cfg.risk.precursor_steps:
-            state.recent = [*state.recent[1 - cfg.risk.precursor_steps:], z]
+        if cfg.reviser.method == "risk" and cfg.risk.precursor_steps:
+            state.recent = [*state.recent, z][-cfg.risk.precursor_steps:]
         state.applied_bin = actions.encode(decision.action, cfg.action)
         state.proposed_bin = actions.encode(step.action, cfg.action)
         state.step += 1
@@ -382,8 +382,9 @@ class Shield:
     def _learn_outcome(self, state: StreamState, recognised: int, step: StepInput) -> None:
         """Count what the stream's previous action led to: the recognised state, or the
         failure of this step's event (an absorbing outcome); then, at a failure, give the
-        observations that preceded it states of their own (:class:`RiskConfig`)."""
-        if state.belief is None:
+        observations that preceded it states of their own (:class:`RiskConfig`). Only the
+        risk reviser reads them, so the paper's counts nothing here."""
+        if state.belief is None or self.config.reviser.method != "risk":
             return
         action_bin = (state.applied_bin if step.applied_action is None
                       else actions.encode(step.applied_action, self.config.action))
