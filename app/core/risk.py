@@ -1,4 +1,4 @@
-"""Failure-aware risk per action over a horizon: the shield's default reviser.
+"""Failure-aware risk per action over a horizon: the risk reviser (``reviser.method: risk``).
 
 The paper flags *states* where a failure was seen and steers away from them. That attaches a
 failure to the wrong thing: a crash in a state happened under an action, and braking there a
@@ -13,15 +13,14 @@ in, and turns those counts into the probability of each failure within H steps:
 * **Horizon.** Finite-horizon value iteration, as probabilistic shields compute it:
   ``Q_h(s, a) = p(s, a) + sum_j P(j | s, a) V_{h-1}(j)`` with ``V_h(s) = Q_h(s, a*)`` for the
   action ``a*`` of least total risk (the safest continuation), ``V_0 = 0``. An action never
-  tried there counts at its monotone lower bound (below): the shield can choose it, and
-  then learns what it does. Counting only tried actions made every state where the controller
-  braked too late look doomed, and the shield braked far from danger instead (DDPG on tuning
-  seed 4: 70.5% successes against 75.0%; docs/risk-reviser.md).
+  tried there counts at its monotone lower bound (below): the shield can choose it, and then
+  learns what it does, so a state where the controller braked too late does not look doomed
+  while a harder braking is still untried.
 * **Monotone prior.** Each criterion has a safe direction: braking harder never raises the risk
   of a collision, speeding up never raises the risk of falling behind. So the risk of an action
   is at least that of every action on its safe side: ``Q`` is replaced by its running maximum
   from the safe end of the action range, which also gives an action never tried in a state the
-  risk of the nearest tried one on its safe side.
+  risk of the riskiest tried one on its safe side.
 
 The table ``Q`` (states x actions x criteria) is refreshed at episode ends and every
 ``refresh_steps`` steps; a step only reads it: ``risk(a) = sum_i belief_i Q(i, a)``.
@@ -186,7 +185,8 @@ def horizon_risk(
     prior_safe: float,
 ) -> FloatArray:
     """``Q_H``: per state, action and criterion, the probability of that failure within
-    ``horizon`` steps when the action is applied now and the safest tried action after.
+    ``horizon`` steps when the action is applied now and the safest action after (an untried
+    one at its monotone bound).
 
     >>> tries = np.array([[1, 1], [0, 0]])          # state 0: each of two actions tried once
     >>> failures = np.array([[[0], [1]], [[0], [0]]])  # action 1 crashed
@@ -200,7 +200,6 @@ def horizon_risk(
     p_fail = failures / denominator[:, :, None]  # posterior mean of each failure
     p_move = counts / denominator.ravel()[rows]
     tried = tries > 0
-    value = np.zeros((n, n_c))
     q_table = monotone(p_fail, directions)
     for _ in range(horizon - 1):
         # V(s) = Q(s, a*) for the action of least total risk, tried or not (an untried one at
