@@ -96,7 +96,9 @@ class Decision(BaseModel):
                                    "probability of that failure within the horizon (risk "
                                    "reviser) or the predicted mass on flagged states (paper).")
     threshold: float | None = Field(description="Alg. 1's adaptive threshold for the "
-                                    "proposed action; null when nothing was inspected.")
+                                    "proposed action (paper reviser) or the largest total "
+                                    "risk kept (risk reviser); null when nothing was "
+                                    "inspected.")
     candidates: list[Candidate] = Field(description="Actions inspected while revising.")
     state: int | None = Field(description="The recognised state (argmax belief).")
     n_states: int = Field(description="States after this step.")
