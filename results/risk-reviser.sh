@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # The risk reviser (docs/risk-reviser.md) against the paper reviser (today's default) with
-# DDPG on tuning seeds 4 and 5: 2 runs x 200 episodes per row, one lockstep group each,
-# in-process shields. Writes results/tuning/risk-reviser/seed-S/ROW and seed-S.md.
+# DDPG, 2 runs per row, one lockstep group each, in-process shields.
+#   results/risk-reviser.sh          tuning seeds 4 and 5, 200 episodes a run:
+#                                    results/tuning/risk-reviser/seed-S/ROW, seed-S-default.md
+#   EVAL=1 results/risk-reviser.sh   the evaluation seeds (base 1000), 300 episodes a run:
+#                                    results/reduced/risk-reviser/ROW, risk-reviser.md
 # ROWS="name=overrides ..." (one per line) replaces the rows. The other rows under
 # results/tuning/risk-reviser (risk-t*) counted only tried actions in the safest
 # continuation: they regenerate at commit 1202fea with their folder's overrides (in each
@@ -11,15 +14,24 @@ cd "$(dirname "$0")/.."
 source scripts/_venv.sh
 rows=${ROWS:-'paper-default={}
 risk-default={"reviser":{"method":"risk"}}'}
-for seed in ${SEEDS:-4 5}; do
-    out=results/tuning/risk-reviser/seed-$seed
+if [ -n "${EVAL:-}" ]; then
+    seeds=1000 episodes=300
+else
+    seeds="4 5" episodes=200
+fi
+for seed in $seeds; do
+    if [ -n "${EVAL:-}" ]; then
+        out=results/reduced/risk-reviser table=results/reduced/risk-reviser.md
+    else
+        out=results/tuning/risk-reviser/seed-$seed table=$out-default.md
+    fi
     dirs=()
     while IFS='=' read -r name config; do
         [ -n "$name" ] || continue
         .venv/bin/python -m client run --arms ddpg+shield --shield-config "$config" \
-            --out "$out/$name" --runs 2 --episodes 200 --seed "$seed" --shield local \
-            --lockstep --workers 1 >/dev/null
+            --out "$out/$name" --runs 2 --episodes "$episodes" --seed "$seed" \
+            --shield local --lockstep --workers 1 >/dev/null
         dirs+=("$out/$name")
     done <<<"$rows"
-    .venv/bin/python -m client compare "${dirs[@]}" --blocks --out "$out-default.md"
+    .venv/bin/python -m client compare "${dirs[@]}" --blocks --out "$table"
 done
