@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The risk reviser (docs/risk-reviser.md) against the paper reviser (today's default) with
 # DDPG, 2 runs per row, one lockstep group each, in-process shields.
-#   results/risk-reviser.sh          tuning seeds 4 and 5, 200 episodes a run:
+#   results/risk-reviser.sh          tuning seeds 4, 5 and 6, 200 episodes a run:
 #                                    results/tuning/risk-reviser/seed-S/ROW, seed-S-default.md
 #   EVAL=1 results/risk-reviser.sh   the evaluation seeds (base 1000), 300 episodes a run:
 #                                    results/reduced/risk-reviser/ROW, risk-reviser.md
@@ -17,7 +17,7 @@ risk-default={"reviser":{"method":"risk"}}'}
 if [ -n "${EVAL:-}" ]; then
     seeds=1000 episodes=300
 else
-    seeds="4 5" episodes=200
+    seeds="4 5 6" episodes=200
 fi
 for seed in $seeds; do
     if [ -n "${EVAL:-}" ]; then
