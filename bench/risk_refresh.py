@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from app.core.belief import Belief
-from app.core.risk import OutcomeCounts, belief_risk, choose, horizon_risk
+from app.core.risk import OutcomeCounts, belief_risk, choose, horizon_risk, kept_limit
 
 ACTIONS, CRITERIA = 20, 2
 DIRECTIONS = ("decrease", "increase")
@@ -65,7 +65,7 @@ def measure(n: int, rounds: int, horizon: int) -> tuple[int, float, float, int]:
 
     def read() -> None:
         total = belief_risk(table, belief).sum(axis=1)
-        choose(total, 15, 0.05, 0.02, -1)
+        choose(total, 15, kept_limit(total, 0.0, 0.001), -1)
 
     refreshes = [timed(refresh, 3) for _ in range(rounds)]
     reads = [timed(read, 2000) for _ in range(rounds)]

@@ -60,6 +60,7 @@ class OutcomeCounts:
         self._moves = np.zeros(0, dtype=np.int64)
         self._m = 0
         self._where: dict[int, int] = {}
+        self._n_failures = 0  # kept so that the per-step check does not scan the counts
         self.version = 0  # counts of steps learned; the risk table compares it
 
     @property
@@ -80,7 +81,7 @@ class OutcomeCounts:
     @property
     def any_failure(self) -> bool:
         """Whether a failure has been counted at all."""
-        return bool(self._failures[: self._n].any())
+        return self._n_failures > 0
 
     def moves(self) -> tuple[IntArray, IntArray, IntArray]:
         """The sparse moves: row ``s * q + a``, next state ``j``, count (read-only views)."""
@@ -116,6 +117,7 @@ class OutcomeCounts:
         """Action ``action_bin`` applied in ``state`` ended in a failure of ``criterion``."""
         self._tries[state, action_bin] += 1
         self._failures[state, action_bin, criterion] += 1
+        self._n_failures += 1
         self.version += 1
 
     def snapshot(self) -> dict[str, Any]:
@@ -155,6 +157,7 @@ class OutcomeCounts:
                        for i, (r, c) in enumerate(zip(rows, cols, strict=True))}
         if len(self._where) != rows.size:
             raise ValueError("outcome moves repeat a (state, action, next state)")
+        self._n_failures = int(failures.sum())
         self.version = int(data["version"])
         return self
 
@@ -220,16 +223,21 @@ def belief_risk(q_table: FloatArray, belief: Belief) -> FloatArray:
     return out
 
 
-def choose(total: FloatArray, proposed_bin: int, threshold: float, margin: float,
-           safe_step: int) -> int:
-    """The bin to apply: the proposal when its risk is under ``threshold`` or within
-    ``margin`` of the safest bin; otherwise the allowed bin nearest to it, ties broken
-    towards ``safe_step`` (-1: slower, +1: faster).
+def kept_limit(total: FloatArray, threshold: float, margin: float) -> float:
+    """The largest total risk an action may carry and be applied: ``threshold``, or ``margin``
+    above the safest action's risk, whichever is higher."""
+    return max(threshold, float(total.min()) + margin)
 
-    >>> choose(np.array([0.0, 0.01, 0.3, 0.6]), 3, 0.05, 0.02, -1)
+
+def choose(total: FloatArray, proposed_bin: int, limit: float, safe_step: int) -> int:
+    """The bin to apply: the proposal when its total risk is within ``limit``
+    (:func:`kept_limit`); otherwise the allowed bin nearest to it, ties broken towards
+    ``safe_step`` (-1: slower, +1: faster).
+
+    >>> total = np.array([0.0, 0.01, 0.3, 0.6])
+    >>> choose(total, 3, kept_limit(total, 0.05, 0.02), -1)
     1
     """
-    limit = max(threshold, float(total.min()) + margin)
     if total[proposed_bin] <= limit:
         return proposed_bin
     allowed = np.flatnonzero(total <= limit)

@@ -544,7 +544,7 @@ class Shield:
         by_bin = risk.belief_risk(self._risk_table[: self.n_states], belief)
         total = by_bin.sum(axis=1)
         start = actions.encode(proposed, cfg.action)
-        limit = max(cfg.risk.threshold, float(total.min()) + cfg.risk.margin)
+        limit = risk.kept_limit(total, cfg.risk.threshold, cfg.risk.margin)
         names = [c.name for c in cfg.criteria]
 
         def named(r: int) -> dict[str, float]:
@@ -559,7 +559,7 @@ class Shield:
                             risk=named(start), threshold=limit, candidates=(),
                             suggested=proposed, **common)
         safe_step = -1 if self._directions[worst] == "decrease" else 1
-        final = risk.choose(total, start, cfg.risk.threshold, cfg.risk.margin, safe_step)
+        final = risk.choose(total, start, limit, safe_step)
         way = 1 if final > start else -1
         candidates = tuple(
             Candidate(actions.decode(r, cfg.action), r,

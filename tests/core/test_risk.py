@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from app.core import InvalidConfig, InvalidSnapshot, Shield, ShieldConfig
-from app.core.risk import OutcomeCounts, choose, horizon_risk, monotone
+from app.core.risk import OutcomeCounts, choose, horizon_risk, kept_limit, monotone
 
 COLLISION = ["decrease"]
 
@@ -82,12 +82,16 @@ def test_a_failure_stays_visible_after_many_safe_tries_of_other_actions() -> Non
 
 
 def test_choose_keeps_a_safe_proposal_and_otherwise_the_nearest_allowed() -> None:
-    total = np.array([0.0, 0.01, 0.03, 0.3, 0.6])
-    assert choose(total, 2, 0.05, 0.02, -1) == 2  # under the threshold
-    assert choose(total, 4, 0.05, 0.02, -1) == 2  # nearest under the threshold
-    assert choose(np.array([0.5, 0.51, 0.9]), 1, 0.05, 0.02, -1) == 1  # within the margin
-    assert choose(np.array([0.0, 0.9, 0.0]), 1, 0.05, 0.02, -1) == 0  # tie: the safe side
-    assert choose(np.array([0.0, 0.9, 0.0]), 1, 0.05, 0.02, 1) == 2
+    def pick(total: list[float], proposed: int, safe_step: int) -> int:
+        risks = np.array(total)
+        return choose(risks, proposed, kept_limit(risks, 0.05, 0.02), safe_step)
+
+    total = [0.0, 0.01, 0.03, 0.3, 0.6]
+    assert pick(total, 2, -1) == 2  # under the threshold
+    assert pick(total, 4, -1) == 2  # nearest under the threshold
+    assert pick([0.5, 0.51, 0.9], 1, -1) == 1  # within the margin
+    assert pick([0.0, 0.9, 0.0], 1, -1) == 0  # tie: the safe side
+    assert pick([0.0, 0.9, 0.0], 1, 1) == 2
 
 
 def crash_world(shield: Shield, episodes: int, seed: int) -> int:
