@@ -46,8 +46,10 @@ CLIFF_OBSERVATION = ObservationSpec(names=("x",), low=(0.0,), high=(1.0,), knee=
 
 
 def cliff_config(**reviser: Any) -> ShieldConfig:
-    """A one-dimensional world for the behavioural tests (see :func:`run_cliff`)."""
-    options: dict[str, Any] = {"activate_after_episodes": 10, "noise_k": 1.0, "noise": "std"}
+    """A one-dimensional world for the behavioural tests (see :func:`run_cliff`), with the
+    paper's reviser unless ``method`` says otherwise."""
+    options: dict[str, Any] = {"method": "paper", "activate_after_episodes": 10, "noise_k": 1.0,
+                               "noise": "std"}
     options.update(reviser)
     return ShieldConfig(
         observation=CLIFF_OBSERVATION,

@@ -1,4 +1,4 @@
-"""Request bodies to service steps (decisions go back through :func:`codec.decision_json`)."""
+"""Request bodies to service steps (decisions go back through :meth:`Decision.to_dict`)."""
 
 from __future__ import annotations
 

@@ -209,16 +209,18 @@ class TransitionConfig:
 
 @dataclass(frozen=True)
 class ReviserConfig:
-    """The action reviser, Algs. 1-3, and its exploration noise (spec §10-13).
+    """The action reviser and its activation.
 
-    ``method`` ``paper`` (the default) revises by the paper's flags on predicted states, with
-    every switch below; ``risk`` by the failure risk of each action over a horizon
-    (:class:`RiskConfig`, :mod:`app.core.risk`), which has not yet beaten it where defaults
-    are chosen (docs/risk-reviser.md). ``activate_after_episodes`` and ``seed`` serve both.
+    ``method`` ``risk`` (the default) revises by the failure risk of each action over a
+    horizon (:class:`RiskConfig`, :mod:`app.core.risk`); it needs no warm-up, since an action
+    reads a risk only where failures were counted, so it acts from the first episode.
+    ``paper`` revises by the paper's flags on predicted states (Algs. 1-3, with every switch
+    below) after ``activate_after_episodes`` (the paper's xi = 50, see
+    :meth:`ShieldConfig.paper`). ``seed`` drives the paper reviser's exploration noise.
     """
 
-    method: Literal["paper", "risk"] = "paper"
-    activate_after_episodes: int = 50  # xi
+    method: Literal["paper", "risk"] = "risk"
+    activate_after_episodes: int = 0  # xi; the paper's 50 in ShieldConfig.paper()
     noise_k: float = 0.001  # K
     noise: Literal["variance", "std"] = "variance"  # A7: V = a_max / max(1, K * episode)
     horizon: int = 1  # k, prediction steps
@@ -344,12 +346,21 @@ class ShieldConfig:
         _check(len(set(names)) == len(names), "criteria", "criterion names must be unique")
 
     @classmethod
+    def paper(cls, **overrides: Any) -> ShieldConfig:
+        """The paper's reviser (flags on predicted states, activated after 50 episodes) with
+        this project's readings of its gaps: the default before the risk reviser."""
+        return dataclasses.replace(
+            cls(reviser=ReviserConfig(method="paper", activate_after_episodes=50)), **overrides)
+
+    @classmethod
     def paper_literal(cls, **overrides: Any) -> ShieldConfig:
-        """The literal reading of every ambiguity of spec §16 (A1-A16)."""
+        """The paper's reviser with the literal reading of every ambiguity (A1-A16)."""
         literal = cls(
             clustering=ClusteringConfig(epsilon=0.3, creation_rule="ets2004"),
             transitions=TransitionConfig(action_source="proposed", across_episodes=True),
             reviser=ReviserConfig(
+                method="paper",
+                activate_after_episodes=50,
                 transpose=False,
                 inspect="first_index",
                 search="literal",
@@ -396,6 +407,7 @@ class ShieldConfig:
 
 # Fields whose default changed after they were added, with the value they were added with.
 ADDED_WITH: dict[tuple[str, str], Any] = {
+    ("reviser", "method"): "paper",
     ("reviser", "one_sided"): False,
     ("observation", "knee"): (),
     ("observation", "knee_shape"): "log",

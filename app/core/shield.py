@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -73,6 +73,26 @@ class Decision:
     stream: str
     shadow: bool = False
     suggested: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able data, written out by hand: this is on the service's per-step path."""
+        return {
+            "action": self.action, "proposed": self.proposed, "revised": self.revised,
+            "reason": self.reason, "verdict": self.verdict, "risk": self.risk,
+            "threshold": self.threshold,
+            "candidates": [{"action": c.action, "bin": c.bin, "verdict": c.verdict,
+                            "risk": c.risk} for c in self.candidates],
+            "state": self.state, "n_states": self.n_states, "new_state": self.new_state,
+            "episode": self.episode, "step": self.step, "model_version": self.model_version,
+            "stream": self.stream, "shadow": self.shadow, "suggested": self.suggested,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Decision:
+        """The inverse of :meth:`to_dict`."""
+        fields = dict(data)
+        fields["candidates"] = tuple(Candidate(**c) for c in data["candidates"])
+        return cls(**fields)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from app.core import Decision, Shield
+from app.core import Shield
 
 ARRAY = "__array__"
 
@@ -116,16 +116,3 @@ def readable(shield: Shield, tpm: str = "sparse", action: int | None = None,
     out["tpm"] = {"format": tpm, "min_prob": min_prob if tpm == "sparse" else None,
                   "matrices": matrices}
     return out
-
-
-def decision_json(d: Decision) -> dict[str, Any]:
-    """A decision record as JSON-able data, by hand: this is on the per-step path."""
-    return {
-        "action": d.action, "proposed": d.proposed, "revised": d.revised, "reason": d.reason,
-        "verdict": d.verdict, "risk": d.risk, "threshold": d.threshold,
-        "candidates": [{"action": c.action, "bin": c.bin, "verdict": c.verdict,
-                        "risk": c.risk} for c in d.candidates],
-        "state": d.state, "n_states": d.n_states, "new_state": d.new_state,
-        "episode": d.episode, "step": d.step, "model_version": d.model_version,
-        "stream": d.stream, "shadow": d.shadow, "suggested": d.suggested,
-    }

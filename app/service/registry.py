@@ -291,7 +291,7 @@ class ModelRegistry:
     def _publish(model: Model, step: Step, decision: Decision) -> None:
         event: dict[str, Any] = {
             "type": "step",
-            "decision": codec.decision_json(decision),
+            "decision": decision.to_dict(),
             "observation": list(step.observation),
             "event": step.event,
             "learn": step.learn,

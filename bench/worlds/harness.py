@@ -4,9 +4,9 @@ a shield configuration and a failure predicate.
 Each world module gives :class:`World`: ``make(seed)`` builds the environment, ``controller(seed)``
 the non-learning controller, ``config`` the shield configuration a user would write for it, and
 ``event(observation, info)`` the failure of a step (or None). An episode that fails ends there.
-The shield learns from the first episode and revises from episode ``warmup + 1``; failures are
-counted over the episodes after the warm-up, per criterion, with and without the shield, on the
-same environment seeds.
+The shield learns from the first episode and revises from the episode its configuration says
+(``reviser.activate_after_episodes``); failures are counted over the episodes after the
+warm-up, per criterion, with and without the shield, on the same environment seeds.
 """
 
 from __future__ import annotations
@@ -44,8 +44,7 @@ def run(world: World, seed: int, episodes: int, warmup: int,
     act = world.controller(seed)
     shield = None
     if config is not None:
-        reviser = {**config.to_dict()["reviser"], "activate_after_episodes": warmup}
-        shield = Shield(ShieldConfig.from_dict({**config.to_dict(), "reviser": reviser}))
+        shield = Shield(config)
     failures: Counter[str] = Counter()
     revised = steps = 0
     for episode in range(episodes):

@@ -148,7 +148,7 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
                 next_obs, reward, terminated, truncated, info = runs[k].env.step(
                     np.array([action], np.float32))
                 if decision is not None:
-                    info["shield"], info["shield_observation"] = decision, place.z
+                    info["shield"], info["shield_observation"] = decision.to_dict(), place.z
                 recorder = runs[k].recorder(place.episode)
                 if recorder is not None:
                     recorder(proposals[k], info)
@@ -202,7 +202,7 @@ def _finisher(run: Run, episode: int, meter: EpisodeMeter, info: dict[str, Any],
 
     def finish(closing: Any) -> None:
         if closing is not None:
-            info["shield_done"] = closing
+            info["shield_done"] = closing.to_dict()
         run.finish(episode, meter.result(info), wall, progress)
 
     return finish

@@ -205,15 +205,15 @@ class EpisodeMeter:
 
     def add(self, proposed: float, reward: float, info: dict[str, Any]) -> float:
         """Count one step; returns the action that was executed."""
-        decision = info.get("shield")
-        if decision is not None and decision.revised:
-            if decision.shadow:
+        decision = info.get("shield")  # the decision record as JSON-able data
+        if decision is not None and decision["revised"]:
+            if decision["shadow"]:
                 self.would += 1
             else:
-                self.interventions[decision.verdict] += 1
+                self.interventions[decision["verdict"]] += 1
         self.diffs.append(info["speed_difference"])
         self.episode_return += reward
-        return proposed if decision is None else float(decision.action)
+        return proposed if decision is None else float(decision["action"])
 
     def result(self, info: dict[str, Any]) -> dict[str, Any]:
         """The measurements of the finished episode, given the last step's info."""
@@ -227,7 +227,7 @@ class EpisodeMeter:
             "speed_diff_mean": float(np.mean(self.diffs)),
             "speed_diff_var": float(np.var(self.diffs)),
             "episode_return": self.episode_return,
-            "n_states": 0 if done is None else done.n_states,
+            "n_states": 0 if done is None else done["n_states"],
         }
 
 

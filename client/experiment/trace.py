@@ -17,7 +17,6 @@ from typing import IO, Any
 
 import numpy as np
 
-from app.core import Decision
 from client.experiment.records import RecordError, read_all
 
 HEADWAY_BANDS = ((0, 10), (10, 20), (20, 40), (40, 80), (80, 150), (150, None))  # [m]
@@ -44,18 +43,19 @@ class TraceWriter:
         """What :func:`client.experiment.runner.play` calls after each step of ``episode``."""
 
         def record(proposed: float, info: dict[str, Any]) -> None:
-            decision: Decision | None = info.get("shield")
+            decision = info.get("shield")
             if decision is not None:
                 self.add(episode, info["shield_observation"], proposed, decision)
 
         return record
 
-    def add(self, episode: int, z: list[float], proposed: float, d: Decision) -> None:
+    def add(self, episode: int, z: list[float], proposed: float, d: dict[str, Any]) -> None:
+        """One step: its observation, the proposal and the decision record (as data)."""
         row = {"e": episode, "z": [round(v, 2) for v in z], "p": round(proposed, 3),
-               "a": None if d.action is None else round(d.action, 3), "r": d.reason, "v": d.verdict,
-               "risk": {k: round(v, 4) for k, v in d.risk.items()},
-               "t": None if d.threshold is None else round(d.threshold, 4), "s": d.state,
-               "n": d.n_states}
+               "a": None if d["action"] is None else round(d["action"], 3), "r": d["reason"],
+               "v": d["verdict"], "risk": {k: round(v, 4) for k, v in d["risk"].items()},
+               "t": None if d["threshold"] is None else round(d["threshold"], 4),
+               "s": d["state"], "n": d["n_states"]}
         self._file.write(json.dumps(row, separators=(",", ":")) + "\n")
 
     def close(self) -> None:

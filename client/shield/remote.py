@@ -19,7 +19,7 @@ from typing import Any
 import httpx
 import websocket
 
-from app.core import Candidate, Decision
+from app.core import Decision
 
 DEFAULT_TIMEOUT = 10.0  # [s]
 
@@ -34,13 +34,6 @@ class ShieldAPIError(Exception):
 
 class ShieldUnavailable(Exception):
     """The service could not be reached."""
-
-
-def decision_from_json(d: Mapping[str, Any]) -> Decision:
-    """A decision record as the typed object of the core."""
-    fields = dict(d)
-    fields["candidates"] = tuple(Candidate(**c) for c in d["candidates"])
-    return Decision(**fields)
 
 
 def step_body(observation: Sequence[float], action: float | None, **options: Any) -> dict[str, Any]:
@@ -119,12 +112,12 @@ class ShieldClient:
                **options: Any) -> Decision:
         """One step; options are the API's (stream, event, done, applied_action, learn, ...)."""
         body = step_body(observation, action, **options)
-        return decision_from_json(self._send(self._steps.revise(body)))
+        return Decision.from_dict(self._send(self._steps.revise(body)))
 
     def revise_batch(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
         """Steps in order (each a step body; with a ``model`` key when no model is set)."""
         result = self._send(self._steps.batch(steps))
-        return [decision_from_json(d) for d in result["decisions"]]
+        return [Decision.from_dict(d) for d in result["decisions"]]
 
     def snapshot(self, name: str | None = None, **query: Any) -> dict[str, Any]:
         """GET /models/{name} (tpm=..., action=..., exact=...)."""
@@ -189,11 +182,11 @@ class AsyncShieldClient:
     async def revise(self, observation: Sequence[float], action: float | None,
                      **options: Any) -> Decision:
         body = step_body(observation, action, **options)
-        return decision_from_json(await self._send(self._steps.revise(body)))
+        return Decision.from_dict(await self._send(self._steps.revise(body)))
 
     async def revise_batch(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
         result = await self._send(self._steps.batch(steps))
-        return [decision_from_json(d) for d in result["decisions"]]
+        return [Decision.from_dict(d) for d in result["decisions"]]
 
     async def snapshot(self, name: str | None = None, **query: Any) -> dict[str, Any]:
         result: dict[str, Any] = await self._call(
@@ -302,7 +295,7 @@ class ShieldSession:
             e = reply["error"]
             status = {"unknown_model": 404, "too_large": 413}.get(e["code"], 422)
             raise ShieldAPIError(status, e["code"], e["message"], e.get("field"))
-        return decision_from_json(reply)
+        return Decision.from_dict(reply)
 
     def revise(self, observation: Sequence[float], action: float | None,
                **options: Any) -> Decision:

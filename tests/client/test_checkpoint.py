@@ -94,7 +94,7 @@ def test_an_ensemble_goes_on_exactly_from_its_state() -> None:
         DDPGEnsemble(config, [1]).restore(state)
 
 
-@pytest.mark.parametrize("every", [97, 450])
+@pytest.mark.parametrize("every", [97, 300])
 def test_a_group_stopped_again_and_again_records_what_an_uninterrupted_one_records(
         tmp_path: Path, every: int, uninterrupted: list[EpisodeRecord]) -> None:
     """Stops mid-episode, between a run's last episode and the others', and after runs are

@@ -204,6 +204,6 @@ def test_precursor_states_are_the_last_observations_before_a_failure(steps: int)
 
 
 def test_the_paper_reviser_counts_no_outcomes() -> None:
-    shield = Shield()
+    shield = Shield(ShieldConfig.paper())
     crash_world(shield, 5, seed=5)
     assert shield.outcomes.tries.sum() == 0 and not shield.outcomes.any_failure

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 import pytest
@@ -25,6 +26,11 @@ from tests.utils import cliff_config
 
 def one_hot(i: int) -> Belief:
     return Belief(np.array([i]), np.array([1.0]))
+
+
+def paper_reviser(**options: Any) -> ReviserConfig:
+    """The paper's reviser with ``options``: the switches below are its."""
+    return ReviserConfig(method="paper", **options)
 
 
 def shield_with(**sections: object) -> Shield:
@@ -112,7 +118,7 @@ def test_a3_pad_learns_the_transition_into_a_brand_new_state() -> None:
 def test_a4_sticky_flags_survive_a_later_uneventful_visit() -> None:
     flags = {}
     for mode in ("sticky", "overwrite"):
-        shield = shield_with(reviser=ReviserConfig(flags=mode))  # type: ignore[arg-type]
+        shield = shield_with(reviser=paper_reviser(flags=mode))  # type: ignore[arg-type]
         shield.step([0.9], None, event="collision", done=True)
         shield.step([0.9], 0.0)
         flags[mode] = int(shield.flags.flags[0])
@@ -121,7 +127,7 @@ def test_a4_sticky_flags_survive_a_later_uneventful_visit() -> None:
 
 def test_a4_rate_flags_follow_the_share_of_failures_among_recognitions() -> None:
     """Count-based flags (A4 c): a state is flagged while its failures are frequent enough."""
-    shield = shield_with(reviser=ReviserConfig(flags="rate", flag_min_rate=0.1,
+    shield = shield_with(reviser=paper_reviser(flags="rate", flag_min_rate=0.1,
                                                 flag_rate_per="recognition"))
     shield.step([0.9], None, event="large_distance", done=True)  # 1 failure, 1 recognition
     assert shield.flags.flags[0] == 2
@@ -142,7 +148,7 @@ def test_failure_centres_hold_the_flag_of_a_state_centred_on_a_failure() -> None
     into it without one; counted per entry, the flag lifts."""
     flags = {}
     for on in (False, True):
-        shield = shield_with(reviser=ReviserConfig(flag_min_rate=0.1, failure_centres=on))
+        shield = shield_with(reviser=paper_reviser(flag_min_rate=0.1, failure_centres=on))
         for _ in range(20):  # ordinary driving: state 0
             shield.step([0.1], 0.0)
             shield.step([0.2], 0.0)
@@ -175,7 +181,7 @@ def test_a4_rate_flags_per_entry_are_not_diluted_by_a_long_stay() -> None:
     stay itself dilutes the crash below the rate."""
     flags = {}
     for per in ("recognition", "entry"):
-        shield = shield_with(reviser=ReviserConfig(flag_min_rate=0.1, flag_rate_per=per))  # type: ignore[arg-type]
+        shield = shield_with(reviser=paper_reviser(flag_min_rate=0.1, flag_rate_per=per))  # type: ignore[arg-type]
         for _ in range(20):
             shield.step([1.0], 0.0)
         shield.step([1.0], None, event="collision", done=True)
@@ -195,7 +201,7 @@ def test_a4_rate_flags_per_entry_are_not_diluted_by_a_long_stay() -> None:
 
 def diffuse_prediction_shield(rule: str) -> Shield:
     """State 0 favourable, state 1 flagged; untried actions predict 50/50."""
-    shield = shield_with(reviser=ReviserConfig(inspect=rule, activate_after_episodes=0))  # type: ignore[arg-type]
+    shield = shield_with(reviser=paper_reviser(inspect=rule, activate_after_episodes=0))  # type: ignore[arg-type]
     shield.step([0.0], 0.0)
     shield.step([0.0], 0.0)
     shield.step([1.0], None, event="collision", done=True)
@@ -211,7 +217,7 @@ def test_a6_literal_search_runs_below_the_hardest_braking() -> None:
     # a one-state model flagged for collision: every action is predicted to collide
     actions = {}
     for mode in ("fixed", "literal"):
-        shield = shield_with(reviser=ReviserConfig(  # type: ignore[arg-type]
+        shield = shield_with(reviser=paper_reviser(  # type: ignore[arg-type]
             search=mode, activate_after_episodes=0, noise="std", noise_k=1e9))
         for _ in range(4):  # four episodes: the noise std is 2 / 4e9, negligible
             shield.step([1.0], None, event="collision", done=True)
@@ -235,7 +241,7 @@ def test_one_sided_revisions_never_go_past_the_proposal_the_wrong_way(
     brakes less than full braking half the time; ``one_sided`` keeps the proposal there."""
     applied = {}
     for one_sided in (False, True):
-        shield = shield_with(reviser=ReviserConfig(activate_after_episodes=0,
+        shield = shield_with(reviser=paper_reviser(activate_after_episodes=0,
                                                    one_sided=one_sided))
         for _ in range(4):
             shield.step([1.0], None, event=event, done=True)
@@ -255,7 +261,7 @@ def test_noise_away_moves_a_revision_only_away_from_the_criterion(event: str) ->
     criterion, where the action's bound cuts them at 0.1."""
     applied = {}
     for side in ("both", "away"):
-        shield = shield_with(reviser=ReviserConfig(activate_after_episodes=0, one_sided=False,
+        shield = shield_with(reviser=paper_reviser(activate_after_episodes=0, one_sided=False,
                                                    noise_side=side))  # type: ignore[arg-type]
         for _ in range(4):
             shield.step([1.0], None, event=event, done=True)

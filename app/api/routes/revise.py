@@ -21,7 +21,6 @@ from app.api.schemas import (
     ReviseRequest,
 )
 from app.core import Decision as CoreDecision
-from app.service.codec import decision_json
 from app.service.registry import DEFAULT_MODEL, ModelRegistry, Step
 
 ERRORS: dict[int | str, dict[str, object]] = {
@@ -52,7 +51,7 @@ async def revise_model(name: NamePath, body: ReviseRequest, request: Request) ->
     check_token(request)
     decision = await step_one(request.app.state.registry, name, to_step(body))
     count(request, name, [decision])
-    return JSONResponse(decision_json(decision))
+    return JSONResponse(decision.to_dict())
 
 
 @router.post("/revise", response_model=Decision, openapi_extra=BEARER_DOCUMENTED)
@@ -74,7 +73,7 @@ def revise_batch(name: NamePath, body: BatchRequest, registry: RegistryDep,
     check_size(len(body.steps), settings.max_batch)
     decisions = registry.step_batch(name, [to_step(s) for s in body.steps])
     count(request, name, decisions)
-    return JSONResponse({"decisions": [decision_json(d) for d in decisions]})
+    return JSONResponse({"decisions": [d.to_dict() for d in decisions]})
 
 
 @router.post("/revise/batch", response_model=BatchResponse, dependencies=[Depends(require_token)])
@@ -86,4 +85,4 @@ def revise_across(body: ModelBatchRequest, registry: RegistryDep, settings: Sett
     assert decisions is not None
     for s, d in zip(body.steps, decisions, strict=True):
         count(request, s.model, [d])
-    return JSONResponse({"decisions": [decision_json(d) for d in decisions]})
+    return JSONResponse({"decisions": [d.to_dict() for d in decisions]})

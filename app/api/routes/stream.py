@@ -13,7 +13,6 @@ from app.api.errors import POLICY_VIOLATION, error_body
 from app.api.routes.revise import NamePath, count, step_one
 from app.api.schemas import ReviseRequest
 from app.core import ShieldError
-from app.service.codec import decision_json
 from app.service.registry import DEFAULT_MODEL, ModelRegistry
 
 router = APIRouter(tags=["stream"])
@@ -67,7 +66,7 @@ async def answer(websocket: WebSocket, registry: ModelRegistry, name: str, text:
     except ShieldError as error:
         return json.dumps(error_body(error.code, error.message, error.field))
     count(websocket, name, [decision])
-    return json.dumps(decision_json(decision))
+    return json.dumps(decision.to_dict())
 
 
 @router.websocket("/ws")
