@@ -1,5 +1,6 @@
 """Reach a shield from Python: in-process, over HTTP (sync or async, single or batch), or a
-WebSocket session; all answer ``revise(observation, action, **options) -> Decision``."""
+WebSocket session; all answer ``revise(observation, action, **options) -> Decision``. Or put
+it in front of a Gymnasium environment: :class:`ShieldWrapper`."""
 
 from client.shield.base import StepShield
 from client.shield.local import LocalShield
@@ -11,6 +12,8 @@ from client.shield.remote import (
     ShieldSession,
     ShieldUnavailable,
 )
+from client.shield.spaces import SpaceMismatch, check_config, config_for
+from client.shield.wrapper import ShieldWrapper
 
 __all__ = [
     "AsyncShieldClient",
@@ -21,4 +24,8 @@ __all__ = [
     "ShieldClient",
     "ShieldSession",
     "ShieldUnavailable",
+    "ShieldWrapper",
+    "SpaceMismatch",
+    "check_config",
+    "config_for",
 ]

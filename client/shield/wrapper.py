@@ -1,53 +1,161 @@
-"""A Gymnasium wrapper that puts a shield in front of any continuous-action environment."""
+"""The shield as a Gymnasium wrapper: any environment with a one-dimensional Box action.
+
+    env = ShieldWrapper(gym.make("client.sim:CarFollowing-v0"))          # the paper's world
+    env = ShieldWrapper(gym.make("Pendulum-v1"), failure=overspeed,
+                        config=config_for(pendulum, {"overspeed_cw": "increase",
+                                                     "overspeed_ccw": "decrease"}))
+
+Each step sends the shield what the environment shows it (``info[observation_key]`` when the
+environment provides one, else the observation), the proposed action and the failure the
+previous step ended in, and gives the environment the shield's action. Failures come from
+``failure(observation, reward, terminated, truncated, info)`` or from ``info[event_key]``, at
+any step: a failure that does not end the episode is learned all the same.
+
+``info`` carries, JSON-able: ``shield`` (the decision record), ``applied_action`` (what the
+environment was given, in its action's shape), ``proposed_action``, ``shield_observation``, and
+at the end of an episode ``shield_done``. Learning controllers should learn from the applied
+action (:class:`client.shield.sb3.AppliedActionReplayBuffer` does it for SB3's off-policy
+algorithms).
+
+A wrapped environment is not :func:`gymnasium.utils.env_checker.check_env`-deterministic: the
+same seed and actions give other ``info`` (and, once it revises, other transitions) as the
+shield learns. ``set_evaluation(True)`` stops learning (the model answers as it is).
+"""
 
 from __future__ import annotations
 
+import itertools
+import os
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
+from app.core import ShieldConfig
 from client.shield.base import StepShield
+from client.shield.local import LocalShield
+from client.shield.spaces import check_config, check_observation, config_for, one_dimensional
+
+Failure = Callable[[Any, float, bool, bool, dict[str, Any]], str | None]
+_copies = itertools.count()
+
+
+def _default_stream() -> str:
+    """A name per wrapper, distinct across the copies of a vectorised environment, in one
+    process or many."""
+    return f"env-{os.getpid()}-{next(_copies)}"
 
 
 class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
     """Revise every proposed action before the environment sees it.
 
-    The shield observes ``info["efsm_observation"]`` when the environment provides it (else the
-    observation itself) and learns the failure named by ``info["event"]`` at the end of an
-    episode. ``info["shield"]`` carries the decision of each step and
-    ``info["shield_observation"]`` the observation it was made on; the action applied is the
-    decision's. With ``shadow`` the shield learns and reports but never changes the action.
+    ``shield`` is any :class:`~client.shield.base.StepShield` (a service client, a WebSocket
+    session, a :class:`LocalShield`); without one, the wrapper keeps a :class:`LocalShield` of
+    its own, built from ``config`` (default: :func:`config_for` the environment, with
+    ``criteria``) and seeded by the first ``reset(seed=...)``. A shield passed in is the
+    caller's to close; one the wrapper made, the wrapper closes.
+
+    ``warmup_steps``: the shield learns and reports but does not change the action for this
+    many steps of this wrapper. ``shadow``: never change it.
     """
 
-    def __init__(self, env: gym.Env[Any, Any], shield: StepShield, stream: str = "0",
-                 shadow: bool = False) -> None:
+    def __init__(self, env: gym.Env[Any, Any], shield: StepShield | None = None, *,
+                 config: ShieldConfig | None = None,
+                 criteria: Mapping[str, str] | None = None,
+                 failure: Failure | None = None, event_key: str = "event",
+                 observation_key: str = "efsm_observation", stream: str | None = None,
+                 warmup_steps: int = 0, shadow: bool = False) -> None:
         super().__init__(env)
-        self.shield = shield
-        self.stream = stream
+        one_dimensional(env.action_space)
+        if warmup_steps < 0:
+            raise ValueError("warmup_steps must be >= 0")
+        if shield is None and config is None:
+            config = config_for(env, criteria)
+        if config is not None:
+            check_config(config, env, observation_key)
+        self.config = config
+        self._owned = shield is None
+        self.shield: StepShield = shield if shield is not None else LocalShield(config)
+        self.failure = failure
+        self.event_key = event_key
+        self.observation_key = observation_key
+        self.stream = stream if stream is not None else _default_stream()
+        self.warmup_steps = warmup_steps
         self.shadow = shadow
-        self._z: list[float] = []
+        self.evaluation = False
+        self.steps = 0  # this wrapper's steps, for the warm-up
+        self._seeded = False
+        self._z: list[float] | None = None
+        self._open = False  # a step of this episode reached the shield
+        self._event: str | None = None  # a failure not yet told, learned on the next step
 
-    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
-        observation, info = self.env.reset(**kwargs)
-        self._z = _efsm(observation, info)
+    def set_evaluation(self, on: bool = True) -> None:
+        """Evaluation mode: the shield still revises but learns nothing (``learn: false``)."""
+        self.evaluation = on
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        if self._open:  # an episode left mid-way: its stream ends here, no failure learned
+            self._end(self._z, None)
+        if seed is not None and self._owned and not self._seeded and self.steps == 0:
+            self._seeded = True
+            self.shield.close()
+            base = self.config or ShieldConfig()
+            reviser = {**base.to_dict()["reviser"], "seed": seed % 2**63}
+            self.config = ShieldConfig.from_dict({**base.to_dict(), "reviser": reviser})
+            self.shield = LocalShield(self.config)
+        observation, info = self.env.reset(seed=seed, options=options)
+        self._z = self._observe(observation, info)
+        if self.config is not None:
+            check_observation(self.config, len(self._z), self.observation_key)
+        self._event = None
         return observation, info
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-        proposed = float(np.asarray(action).reshape(-1)[0])
+        if self._z is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        proposed = float(np.asarray(action, dtype=np.float64).reshape(-1)[0])
         z = self._z
-        decision = self.shield.revise(z, proposed, stream=self.stream, shadow=self.shadow)
-        applied = np.asarray([decision.action], dtype=np.float32)
+        shadow = self.shadow or self.steps < self.warmup_steps
+        decision = self.shield.revise(z, proposed, stream=self.stream, event=self._event,
+                                      shadow=shadow, learn=not self.evaluation)
+        self._open, self._event = True, None
+        self.steps += 1
+        assert decision.action is not None
+        space = self.env.action_space
+        applied = np.asarray(decision.action, dtype=space.dtype).reshape(space.shape)
         observation, reward, terminated, truncated, info = self.env.step(applied)
-        self._z = _efsm(observation, info)
-        info["shield"] = decision
+        event = (self.failure(observation, float(reward), terminated, truncated, info)
+                 if self.failure is not None else info.get(self.event_key))
+        self._z = self._observe(observation, info)
+        info["shield"] = decision.to_dict()
+        info["applied_action"] = applied
+        info["proposed_action"] = proposed
         info["shield_observation"] = z
         if terminated or truncated:
-            info["shield_done"] = self.shield.revise(self._z, None, stream=self.stream,
-                                                     done=True, event=info.get("event"))
+            info["shield_done"] = self._end(self._z, event)
+        else:
+            self._event = event
         return observation, float(reward), terminated, truncated, info
 
+    def close(self) -> None:
+        """End the open episode's stream (no failure learned), close the shield if the wrapper
+        made it, then the environment."""
+        if self._open:
+            self._end(self._z, None)
+        if self._owned:
+            self.shield.close()
+        super().close()
 
-def _efsm(observation: Any, info: dict[str, Any]) -> list[float]:
-    z = info.get("efsm_observation", observation)
-    return [float(v) for v in np.asarray(z).reshape(-1)]
+    def _end(self, z: list[float] | None, event: str | None) -> dict[str, Any]:
+        assert z is not None
+        self._open, self._event = False, None
+        done = self.shield.revise(z, None, stream=self.stream, done=True, event=event,
+                                  learn=not self.evaluation)
+        return done.to_dict()
+
+    def _observe(self, observation: Any, info: dict[str, Any]) -> list[float]:
+        z = info.get(self.observation_key, observation)
+        return [float(v) for v in np.asarray(z, dtype=np.float64).reshape(-1)]
+

@@ -10,6 +10,7 @@ import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
+from app.core import ShieldConfig
 from client.sim import lead as lead_data
 
 DT = lead_data.DT  # [s]
@@ -107,6 +108,11 @@ class CarFollowingEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]])
         self._t = 0
         self._headway = self._v_ego = self._v_lead = self._a_prev = 0.0
 
+    def shield_config(self) -> ShieldConfig:
+        """The shield this world was made for: the e-FSM observation of ``info`` and the
+        paper's failures (:func:`client.shield.spaces.config_for` reads it)."""
+        return ShieldConfig()
+
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[npt.NDArray[np.float32],
                                                               dict[str, Any]]:
@@ -178,7 +184,8 @@ class CarFollowingEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]])
 def register() -> None:
     """Register ``CarFollowing-v0`` with Gymnasium (idempotent)."""
     if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="client.sim.car_following:CarFollowingEnv")
+        gym.register(id=ENV_ID, entry_point="client.sim.car_following:CarFollowingEnv",
+                     max_episode_steps=MAX_STEPS)
 
 
 register()

@@ -28,7 +28,8 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
 
 
 def episodes(shield: StepShield, count: int = 10) -> list[tuple[Any, ...]]:
-    env = ShieldWrapper(CarFollowingEnv(lead=lead.synthetic(2, hard_braking=True)), shield)
+    env = ShieldWrapper(CarFollowingEnv(lead=lead.synthetic(2, hard_braking=True)), shield,
+                        stream="car-1")
     controller = PRESETS["aggressive"]
     records: list[tuple[Any, ...]] = []
     obs, _ = env.reset(seed=5)

@@ -1,0 +1,35 @@
+"""Stable-Baselines3 learns from what the shield applied, not from what it proposed.
+
+SB3's off-policy algorithms (TD3, DDPG, SAC) store the action the policy proposed. Behind a
+:class:`~client.shield.wrapper.ShieldWrapper` the environment did something else whenever the
+shield revised, and a critic trained on the proposal learns a transition that never happened.
+This buffer stores ``info["applied_action"]`` instead::
+
+    model = TD3("MlpPolicy", ShieldWrapper(env), replay_buffer_class=AppliedActionReplayBuffer)
+
+Needs ``stable-baselines3`` (``pip install .[sb3]``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from stable_baselines3.common.buffers import ReplayBuffer
+
+
+class AppliedActionReplayBuffer(ReplayBuffer):
+    """A :class:`ReplayBuffer` that records the action each environment copy applied."""
+
+    def add(self, obs: np.ndarray, next_obs: np.ndarray, action: np.ndarray,
+            reward: np.ndarray, done: np.ndarray, infos: list[dict[str, Any]]) -> None:
+        assert isinstance(self.action_space, spaces.Box)
+        low, high = self.action_space.low, self.action_space.high
+        action = np.array(action, copy=True).reshape((self.n_envs, self.action_dim))
+        for i, info in enumerate(infos):
+            applied = info.get("applied_action")
+            if applied is not None:  # stored as SB3 stores actions: scaled to [-1, 1]
+                scaled = 2.0 * (np.asarray(applied).reshape(-1) - low) / (high - low) - 1.0
+                action[i] = scaled.reshape(-1)
+        super().add(obs, next_obs, action, reward, done, infos)

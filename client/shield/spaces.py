@@ -1,0 +1,121 @@
+"""A shield configuration derived from an environment's spaces, and checked against them.
+
+The core knows nothing of Gymnasium; this is where a ``Box`` becomes an
+:class:`~app.core.ShieldConfig` and where a configuration written by hand is checked against
+the environment it will guard, so that a mismatch fails at construction with the field at
+fault instead of at the first step (or never).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from app.core import ActionSpec, Criterion, ObservationSpec, ShieldConfig
+
+DEFAULT_BINS = 20
+
+
+class SpaceMismatch(ValueError):
+    """A shield configuration or an action space that does not fit the environment."""
+
+    def __init__(self, message: str, field: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+
+
+def one_dimensional(space: gym.Space[Any]) -> gym.spaces.Box:
+    """The action space, if the shield can revise it: a Box of one finite number."""
+    if not isinstance(space, gym.spaces.Box):
+        raise SpaceMismatch(f"the shield revises a continuous Box action, not {space}",
+                            "action_space")
+    if int(np.prod(space.shape)) != 1:
+        raise SpaceMismatch(
+            f"the shield revises one action dimension; this action has shape {space.shape}. "
+            "Shield one dimension (wrap the environment so that the others are fixed or "
+            "chosen by the controller alone) or use one shield model per dimension",
+            "action_space")
+    if not (np.isfinite(space.low).all() and np.isfinite(space.high).all()):
+        raise SpaceMismatch("the action's bounds must be finite", "action_space")
+    return space
+
+
+def config_for(env: gym.Env[Any, Any], criteria: Mapping[str, str] | None = None, *,
+               bins: int = DEFAULT_BINS, low: Sequence[float] | None = None,
+               high: Sequence[float] | None = None, base: ShieldConfig | None = None
+               ) -> ShieldConfig:
+    """The shield configuration for ``env``.
+
+    An environment that knows its shield (a ``shield_config()`` method on the unwrapped
+    environment, as ``CarFollowing-v0`` has) gives its own. Otherwise the observation's Box
+    bounds (or ``low``/``high`` where they are infinite) normalise the observation, the action
+    range is cut into ``bins`` bins, and ``criteria`` names each failure with the direction
+    of the action that moves away from it: ``{"crash": "decrease"}`` (slower is safer).
+    Everything else is ``base`` (default: the shield's defaults).
+    """
+    action = one_dimensional(env.action_space)
+    own = getattr(env.unwrapped, "shield_config", None)
+    if callable(own) and criteria is None and low is None and high is None:
+        config: ShieldConfig = own()
+        return config
+    if not criteria:
+        raise SpaceMismatch("name the failures and the action's direction away from each, "
+                            "e.g. criteria={'crash': 'decrease'}", "criteria")
+    space = env.observation_space
+    if not isinstance(space, gym.spaces.Box):
+        raise SpaceMismatch(f"the shield observes a Box, not {space}", "observation_space")
+    size = int(np.prod(space.shape))
+    lows = np.asarray(space.low, np.float64).reshape(-1) if low is None else np.asarray(low)
+    highs = np.asarray(space.high, np.float64).reshape(-1) if high is None else np.asarray(high)
+    if lows.shape != (size,) or highs.shape != (size,):
+        raise SpaceMismatch(f"low and high need one bound per observation number ({size})",
+                            "low")
+    unbounded = [i for i in range(size) if not (np.isfinite(lows[i]) and np.isfinite(highs[i]))]
+    if unbounded:
+        raise SpaceMismatch(f"observation dimensions {unbounded} are unbounded; give low= and "
+                            "high= with the range they normally take", "observation_space")
+    a_low, a_high = float(action.low.reshape(-1)[0]), float(action.high.reshape(-1)[0])
+    base = base or ShieldConfig()
+    return dataclasses.replace(
+        base,
+        observation=ObservationSpec(names=tuple(f"x{i}" for i in range(size)),
+                                    low=tuple(lows.tolist()), high=tuple(highs.tolist()),
+                                    knee=()),
+        action=ActionSpec(low=a_low, high=a_high, step=(a_high - a_low) / bins),
+        criteria=tuple(Criterion(name, direction)  # type: ignore[arg-type]
+                       for name, direction in criteria.items()),
+    )
+
+
+def check_config(config: ShieldConfig, env: gym.Env[Any, Any],
+                 observation_key: str = "efsm_observation") -> None:
+    """Raise :class:`SpaceMismatch` where ``config`` cannot guard ``env``: actions the
+    environment would not accept, or observations of another size (checked here when the
+    environment shows the shield its observation itself, at the first reset otherwise)."""
+    action = one_dimensional(env.action_space)
+    a_low, a_high = float(action.low.reshape(-1)[0]), float(action.high.reshape(-1)[0])
+    tolerance = 1e-6 * max(1.0, a_high - a_low)
+    if config.action.low < a_low - tolerance:
+        raise SpaceMismatch(f"{config.action.low} lies below the environment's {a_low}",
+                            "action.low")
+    if config.action.high > a_high + tolerance:
+        raise SpaceMismatch(f"{config.action.high} lies above the environment's {a_high}",
+                            "action.high")
+    space = env.observation_space
+    if getattr(env.unwrapped, "shield_config", None) is None and isinstance(space,
+                                                                          gym.spaces.Box):
+        check_observation(config, int(np.prod(space.shape)), observation_key)
+
+
+def check_observation(config: ShieldConfig, size: int, observation_key: str) -> None:
+    """Raise :class:`SpaceMismatch` unless the shield's observations hold ``size`` numbers."""
+    if size != config.observation.size:
+        raise SpaceMismatch(
+            f"the configuration observes {config.observation.size} numbers "
+            f"({', '.join(config.observation.names)}), the environment shows {size} "
+            f"(its observation, or info[{observation_key!r}] where it gives one)",
+            "observation.names")

@@ -1,0 +1,67 @@
+"""Pendulum-v1 with a failure it does not know: spinning faster than 6 rad/s either way.
+
+A controller that pumps energy into the swing (full torque along the angular velocity) spins
+the pendulum ever faster. The shield is told of an overspeed by a failure predicate, at any
+step (the episode goes on), and learns which torques lead there. Prints the steps spent over
+the limit per 1000 steps, with and without the shield, in the episodes after a warm-up.
+
+    python examples/pendulum_overspeed.py [--episodes 60]
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from client.shield import ShieldWrapper, config_for
+
+LIMIT = 6.0  # [rad/s]
+
+
+def overspeed(observation: Any, reward: float, terminated: bool, truncated: bool,
+              info: dict[str, Any]) -> str | None:
+    """The failure of a step, if any: its name says which way the torque should go."""
+    if observation[2] > LIMIT:
+        return "overspeed_ccw"  # less torque moves away from it
+    if observation[2] < -LIMIT:
+        return "overspeed_cw"  # more torque moves away from it
+    return None
+
+
+def run(env: gym.Env[Any, Any], episodes: int, warmup: int, seed: int) -> float:
+    """Overspeed steps per 1000 steps after ``warmup`` episodes of the energy pump."""
+    rng = np.random.default_rng(seed)
+    over = steps = 0
+    for episode in range(episodes):
+        observation, _ = env.reset(seed=seed + episode)
+        done = False
+        while not done:
+            push = 2.0 if observation[2] >= 0 else -2.0
+            action = np.array([np.clip(push + rng.normal(0.0, 0.5), -2.0, 2.0)], np.float32)
+            observation, reward, terminated, truncated, _ = env.step(action)
+            done = terminated or truncated
+            if episode >= warmup:
+                steps += 1
+                over += overspeed(observation, float(reward), terminated, truncated, {}) is not None
+    return 1000.0 * over / max(steps, 1)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=60)
+    parser.add_argument("--warmup", type=int, default=20)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    plain = gym.make("Pendulum-v1")
+    config = config_for(plain, {"overspeed_ccw": "decrease", "overspeed_cw": "increase"})
+    shielded = ShieldWrapper(gym.make("Pendulum-v1"), config=config, failure=overspeed)
+    alone = run(plain, args.episodes, args.warmup, args.seed)
+    with_shield = run(shielded, args.episodes, args.warmup, args.seed)
+    print(f"overspeed steps per 1000: alone {alone:.1f}, shielded {with_shield:.1f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,232 @@
+"""The shield as a Gymnasium and Stable-Baselines3 user meets it: ShieldWrapper, config_for,
+the replay buffer that learns the applied action, the registered environment."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from app.core import ReviserConfig, ShieldConfig
+from client.shield import LocalShield, ShieldWrapper, SpaceMismatch, config_for
+from client.sim.car_following import CarFollowingEnv
+from client.sim.lead import synthetic
+
+EDGE = {"edge": "decrease"}  # pushing less is safer
+
+
+class Ledge(gym.Env[np.ndarray, np.ndarray]):
+    """A point pushed along [0, 1] by its action; beyond 0.9 it falls off ("edge", the episode
+    ends); ``bumps`` also reports a "bump" above 0.7 without ending the episode."""
+
+    def __init__(self, bumps: bool = False, dims: int = 1) -> None:
+        self.observation_space = gym.spaces.Box(0.0, 1.0, shape=(1,), dtype=np.float64)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(dims,), dtype=np.float32)
+        self.bumps = bumps
+        self.x, self.t = 0.5, 0
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        self.x, self.t = float(self.np_random.uniform(0.3, 0.6)), 0
+        return np.array([self.x]), {}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        assert action.shape == self.action_space.shape and action.dtype == np.float32
+        self.x = float(np.clip(self.x + 0.1 * float(action[0]), 0.0, 1.0))
+        self.t += 1
+        fell = self.x > 0.9
+        event = "edge" if fell else ("bump" if self.bumps and self.x > 0.7 else None)
+        return np.array([self.x]), float(self.x), fell, self.t >= 30, {"event": event}
+
+
+def pushing(episodes: int, env: gym.Env[Any, Any], seed: int = 0) -> list[dict[str, Any]]:
+    """A controller that mostly pushes forwards; every step's info."""
+    rng = np.random.default_rng(seed)
+    infos = []
+    for episode in range(episodes):
+        env.reset(seed=seed * 1000 + episode)
+        while True:
+            _, _, terminated, truncated, info = env.step(
+                np.array([rng.uniform(-0.5, 1.0)], np.float32))
+            infos.append(info)
+            if terminated or truncated:
+                break
+    return infos
+
+
+def test_the_shield_wrapper_learns_a_ledge_and_keeps_the_point_on_it() -> None:
+    alone = sum(i["event"] == "edge" for i in pushing(60, Ledge()))
+    env = ShieldWrapper(Ledge(), criteria=EDGE)
+    infos = pushing(60, env)
+    assert sum(i["event"] == "edge" for i in infos) < alone / 2
+    revised = [i for i in infos if i["shield"]["revised"]]
+    assert revised and all(i["applied_action"][0] < i["proposed_action"] for i in revised)
+    json.dumps(infos[-1]["shield"]), json.dumps(infos[-1]["shield_done"])  # JSON-able
+    assert all(float(i["applied_action"][0]) == pytest.approx(i["shield"]["action"])
+               for i in infos)
+
+
+def test_several_action_dimensions_are_refused_at_construction() -> None:
+    with pytest.raises(SpaceMismatch, match="one action dimension") as error:
+        ShieldWrapper(Ledge(dims=2), criteria=EDGE)
+    assert error.value.field == "action_space"
+
+
+def test_config_for_reads_the_spaces_and_asks_for_what_they_cannot_say() -> None:
+    pendulum = gym.make("Pendulum-v1")
+    with pytest.raises(SpaceMismatch, match="name the failures") as error:
+        config_for(pendulum)
+    assert error.value.field == "criteria"
+    config = config_for(pendulum, {"overspeed_cw": "increase", "overspeed_ccw": "decrease"})
+    assert config.observation.low == (-1.0, -1.0, -8.0)
+    assert (config.action.low, config.action.high, config.action.n_bins) == (-2.0, 2.0, 20)
+    assert [c.name for c in config.criteria] == ["overspeed_cw", "overspeed_ccw"]
+    unbounded = gym.make("MountainCarContinuous-v0")
+    unbounded.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(2,))
+    with pytest.raises(SpaceMismatch, match=r"dimensions \[0, 1\] are unbounded"):
+        config_for(unbounded, EDGE)
+    assert config_for(unbounded, EDGE, low=[-1.2, -0.07], high=[0.6, 0.07]).observation.high \
+        == (0.6, 0.07)
+    assert config_for(CarFollowingEnv(lead=synthetic(0, count=2))) == ShieldConfig()
+
+
+def test_a_configuration_that_does_not_fit_the_environment_fails_at_construction() -> None:
+    with pytest.raises(SpaceMismatch, match="below the environment's -1.0") as error:
+        ShieldWrapper(gym.make("MountainCarContinuous-v0"), config=ShieldConfig())
+    assert error.value.field == "action.low"
+    with pytest.raises(SpaceMismatch, match="observes 3 numbers") as error:
+        ShieldWrapper(Ledge(), config=ShieldConfig(action=config_for(Ledge(), EDGE).action))
+    assert error.value.field == "observation.names"
+
+
+def test_every_copy_has_a_stream_and_a_reset_mid_episode_closes_it() -> None:
+    shared = LocalShield(config_for(Ledge(), EDGE))
+    envs = [ShieldWrapper(Ledge(), shared) for _ in range(3)]
+    assert len({e.stream for e in envs}) == 3
+    for i, env in enumerate(envs):
+        env.reset(seed=i)
+        env.step(np.array([0.1], np.float32))
+    assert set(shared.shield.streams) == {e.stream for e in envs}
+    episodes = shared.shield.counters.episodes
+    envs[0].reset()  # mid-episode
+    assert envs[0].stream not in shared.shield.streams
+    assert shared.shield.counters.episodes == episodes + 1
+
+
+def test_vectorised_copies_write_streams_of_their_own() -> None:
+    from stable_baselines3.common.env_util import make_vec_env
+
+    shared = LocalShield(config_for(Ledge(), EDGE))
+    venv = make_vec_env(Ledge, n_envs=4, seed=0, wrapper_class=ShieldWrapper,
+                        wrapper_kwargs={"shield": shared})
+    venv.reset()
+    for _ in range(3):
+        venv.step(np.zeros((4, 1), np.float32))
+    assert len(shared.shield.streams) == 4
+    assert shared.shield.counters.steps == 3 * 4  # a reset alone sends the shield nothing
+    venv.close()
+
+
+def test_a_failure_that_does_not_end_the_episode_is_learned() -> None:
+    env = ShieldWrapper(Ledge(bumps=True), criteria={"edge": "decrease", "bump": "decrease"})
+    infos = pushing(5, env)
+    bumps = sum(i["event"] == "bump" for i in infos)
+    assert bumps > 0
+    outcomes = env.shield.shield.outcomes  # type: ignore[attr-defined]
+    assert outcomes.failures[..., 1].sum() == bumps
+
+
+def test_a_failure_predicate_replaces_info() -> None:
+    def low(observation: Any, reward: float, terminated: bool, truncated: bool,
+            info: dict[str, Any]) -> str | None:
+        return "edge" if observation[0] > 0.8 else None  # before the ledge itself
+
+    env = ShieldWrapper(Ledge(), criteria=EDGE, failure=low)
+    pushing(5, env)
+    assert env.shield.shield.outcomes.failures.sum() > 0  # type: ignore[attr-defined]
+
+
+def test_the_same_seed_gives_the_same_shield_and_evaluation_learns_nothing() -> None:
+    def decisions(seed: int) -> list[dict[str, Any]]:
+        """The paper's reviser, whose revisions carry noise from the shield's seed."""
+        config = config_for(Ledge(), EDGE, base=ShieldConfig.paper(
+            reviser=ReviserConfig(method="paper", activate_after_episodes=5)))
+        env = ShieldWrapper(Ledge(), config=config, stream="point")
+        env.reset(seed=seed)
+        return [i["shield"] for i in pushing(40, env, seed=1)]
+
+    assert decisions(3) == decisions(3)
+    assert decisions(3) != decisions(4)
+    env = ShieldWrapper(Ledge(), criteria=EDGE)
+    pushing(20, env)
+    env.set_evaluation(True)
+    version = env.shield.shield.counters.model_version  # type: ignore[attr-defined]
+    infos = pushing(5, env)
+    assert env.shield.shield.counters.model_version == version  # type: ignore[attr-defined]
+    assert all(i["shield"]["model_version"] == version for i in infos)
+
+
+def test_warm_up_in_steps_reports_but_does_not_revise() -> None:
+    env = ShieldWrapper(Ledge(), criteria=EDGE, warmup_steps=10**6)
+    infos = pushing(40, env)
+    would = [i for i in infos if i["shield"]["revised"]]
+    assert would and all(i["shield"]["shadow"] for i in would)
+    assert all(i["applied_action"][0] == pytest.approx(i["proposed_action"], abs=1e-6)
+               for i in infos)
+
+
+def test_the_wrapper_closes_only_the_shield_it_made() -> None:
+    closed: list[str] = []
+
+    class Recorder(LocalShield):
+        def close(self) -> None:
+            closed.append("closed")
+
+    ShieldWrapper(Ledge(), Recorder(config_for(Ledge(), EDGE))).close()
+    assert not closed
+
+
+def test_the_environment_is_registered_with_its_time_limit() -> None:
+    code = ("import gymnasium as gym; env = gym.make('client.sim:CarFollowing-v0'); "
+            "print(env.spec.max_episode_steps)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "800"
+
+
+def test_sb3_learns_from_the_applied_action() -> None:
+    from stable_baselines3 import TD3
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    from client.shield.sb3 import AppliedActionReplayBuffer
+
+    class Applied(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.applied: list[float] = []
+            self.revised = 0
+
+        def _on_step(self) -> bool:
+            info = self.locals["infos"][0]
+            self.applied.append(float(info["applied_action"][0]))
+            self.revised += info["shield"]["revised"]
+            return True
+
+    env = ShieldWrapper(Ledge(), criteria=EDGE)
+    pushing(40, env)  # the shield has met the ledge before the learner starts
+    pushy = NormalActionNoise(mean=np.array([0.6]), sigma=np.array([0.3]))  # towards the ledge
+    model = TD3("MlpPolicy", env, learning_starts=50, train_freq=1, seed=0, action_noise=pushy,
+                replay_buffer_class=AppliedActionReplayBuffer,
+                policy_kwargs={"net_arch": [16, 16]})
+    callback = Applied()
+    model.learn(total_timesteps=300, callback=callback)
+    assert callback.revised > 0
+    stored = model.replay_buffer.actions[:300, 0, 0]  # type: ignore[union-attr]
+    np.testing.assert_allclose(stored, np.array(callback.applied), atol=1e-6)  # [-1, 1] here
