@@ -38,7 +38,9 @@ class Settings(BaseSettings):
     )
     max_body_bytes: int = Field(8 * 2**20, ge=1024, description="Largest request body (413).")
     max_snapshot_bytes: int = Field(
-        2**30, ge=1024, description="Largest snapshot uploaded with PUT /models/{name} (413)."
+        256 * 2**20, ge=1024,
+        description="Largest snapshot uploaded with PUT /models/{name} (413), and the most its "
+        "arrays may take once read (422 invalid_snapshot).",
     )
     max_batch: int = Field(4096, ge=1, description="Most steps in one batch request.")
     snapshot_every: int = Field(

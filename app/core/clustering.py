@@ -14,8 +14,10 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
+from app.core import _stored as stored
 from app.core._arrays import ensure_capacity
 from app.core.config import ClusteringConfig
+from app.core.errors import InvalidSnapshot
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -238,19 +240,24 @@ class EvolvingClusterer:
     def restore(
         cls, config: ClusteringConfig, dim: int, max_states: int, data: dict[str, Any]
     ) -> EvolvingClusterer:
-        """Rebuild a clusterer from :meth:`snapshot` output."""
+        """Rebuild a clusterer from :meth:`snapshot` output, every part checked."""
         self = cls(config, dim, max_states)
-        self.k = int(data["k"])
-        self.beta = np.array(data["beta"], dtype=np.float64).reshape(dim)
-        self.sigma = float(data["sigma"])
-        self.capacity_hits = int(data["capacity_hits"])
-        self._centres = np.array(data["centres"], dtype=np.float64).reshape(-1, dim)
-        self._n = self._centres.shape[0]
-        self._sq_norms = np.array(data["sq_norms"], dtype=np.float64).reshape(self._n)
-        self._potentials = np.array(data["potentials"], dtype=np.float64).reshape(self._n)
-        self._radii = np.array(data["radii"], dtype=np.float64).reshape(self._n)
-        self._support = np.array(data["support"], dtype=np.int64).reshape(self._n)
-        self._scatter = np.array(data["scatter"], dtype=np.float64).reshape(self._n)
+        self.k = stored.integer(data["k"], "clustering.k")
+        self.beta = stored.floats(data["beta"], "clustering.beta", (dim,))
+        self.sigma = stored.real(data["sigma"], "clustering.sigma", low=0.0)
+        self.capacity_hits = stored.integer(data["capacity_hits"], "clustering.capacity_hits")
+        centres = stored.floats(data["centres"], "clustering.centres")
+        n = centres.size // dim if dim else 0
+        if centres.shape not in ((n, dim), (n * dim,)) or n > max_states:
+            raise InvalidSnapshot(f"expected at most {max_states} centres of {dim} numbers",
+                                  field="clustering.centres")
+        self._n = n
+        self._centres = centres.reshape(n, dim)
+        self._sq_norms = stored.floats(data["sq_norms"], "clustering.sq_norms", (n,), low=0.0)
+        self._potentials = stored.floats(data["potentials"], "clustering.potentials", (n,))
+        self._radii = stored.floats(data["radii"], "clustering.radii", (n,), low=0.0)
+        self._support = stored.ints(data["support"], "clustering.support", (n,), low=1)
+        self._scatter = stored.floats(data["scatter"], "clustering.scatter", (n,), low=0.0)
         self._variances = np.zeros(self._n)
         for i in range(self._n):
             self._refresh_variance(i)

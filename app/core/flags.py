@@ -11,7 +11,9 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
+from app.core import _stored as stored
 from app.core._arrays import ensure_capacity
+from app.core.errors import InvalidSnapshot
 
 IntArray = npt.NDArray[np.int64]
 FlagMode = Literal["sticky", "overwrite", "rate"]
@@ -144,20 +146,21 @@ class StateFlags:
         lack them, and those from before failure centres were kept lack these: they count
         from the restore on."""
         self = cls(mode, max_states, n_criteria, min_rate, rate_per, failure_centres)
-        self._flags = np.array(data["flags"], dtype=np.int64).ravel()
-        self._visits = np.array(data["visits"], dtype=np.int64).ravel()
-        self._n = self._flags.shape[0]
-        self._entries = _counts(data.get("entries"), self._n)
-        self._centres = _counts(data.get("centres"), self._n)
-        self._failures = np.array(data["failures"], dtype=np.int64).reshape(self._n, n_criteria)
-        sizes = {a.shape[0] for a in (self._visits, self._entries, self._centres)}
-        if sizes != {self._n}:
-            raise ValueError("flags, visits, entries and centres disagree on the state count")
+        self._flags = stored.ints(data["flags"], "flags.flags", high=n_criteria).ravel()
+        n = self._n = self._flags.shape[0]
+        if n > max_states:
+            raise InvalidSnapshot(f"more than {max_states} states", field="flags.flags")
+        self._visits = stored.ints(data["visits"], "flags.visits", (n,))
+        self._entries = _counts(data.get("entries"), "flags.entries", n)
+        self._centres = _counts(data.get("centres"), "flags.centres", n, high=n_criteria)
+        self._failures = stored.ints(data["failures"], "flags.failures", (n, n_criteria))
         return self
 
 
-def _counts(data: Any, n: int) -> IntArray:
-    return np.zeros(n, dtype=np.int64) if data is None else np.array(data, dtype=np.int64).ravel()
+def _counts(data: Any, field: str, n: int, high: int | None = None) -> IntArray:
+    if data is None:
+        return np.zeros(n, dtype=np.int64)
+    return stored.ints(data, field, (n,), high=high)
 
 
 def _first(own: IntArray, centres: IntArray) -> IntArray:

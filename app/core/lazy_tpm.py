@@ -23,9 +23,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from app.core import _stored as stored
 from app.core._arrays import ensure_capacity
 from app.core.belief import Belief
 from app.core.config import TransitionConfig
+from app.core.errors import InvalidSnapshot
 from app.core.tpm import marginal_by_action
 
 FloatArray = npt.NDArray[np.float64]
@@ -345,13 +347,14 @@ class LazyTransitions:
     def restore(
         cls, n_actions: int, config: TransitionConfig, max_states: int, data: dict[str, Any]
     ) -> LazyTransitions:
-        """Rebuild from :meth:`snapshot` output, bit for bit."""
+        """Rebuild from :meth:`snapshot` output, bit for bit, every part checked."""
         self = cls(n_actions, config, max_states)
-        n = int(data["n_states"])
+        n = stored.integer(data["n_states"], "transitions.n_states", high=max_states)
         q = n_actions
         self._n = n
-        self._log_decay = np.array(data["log_decay"], dtype=np.float64).reshape(q)
-        self._created = np.array(data["created"], dtype=np.float64).reshape(q, n)
+        self._log_decay = stored.floats(data["log_decay"], "transitions.log_decay", (q,),
+                                        high=0.0)
+        self._created = stored.floats(data["created"], "transitions.created", (q, n))
         self._pad = np.zeros((q, n))
         self._pad_tail = np.zeros((q, n + 1))
         self._offset = np.zeros((q, n))
@@ -359,17 +362,30 @@ class LazyTransitions:
         self._nnz = np.zeros((q, n), dtype=np.int64)
         for name in ("_log_pad", "_log_level", "_learned_scale", "_pad_scale"):
             setattr(self, name, np.zeros((q, n)))
-        for a, entry in enumerate(data["actions"]):
-            width = int(entry["width"])
-            nnz = np.array(entry["nnz"], dtype=np.int64).reshape(n)
+        entries = data["actions"]
+        if not isinstance(entries, list) or len(entries) != q:
+            raise InvalidSnapshot(f"expected one entry per action ({q})",
+                                  field="transitions.actions")
+        for a, entry in enumerate(entries):
+            field = f"transitions.actions.{a}"
+            width = stored.integer(entry["width"], f"{field}.width", high=max(2 * n, 8))
+            nnz = stored.ints(entry["nnz"], f"{field}.nnz", (n,), high=min(width, n))
             self._nnz[a] = nnz
-            self._offset[a] = np.array(entry["offset"], dtype=np.float64).reshape(n)
-            self._row_sum[a] = np.array(entry["row_sum"], dtype=np.float64).reshape(n)
+            self._offset[a] = stored.floats(entry["offset"], f"{field}.offset", (n,))
+            self._row_sum[a] = stored.floats(entry["row_sum"], f"{field}.row_sum", (n,),
+                                             low=0.0)
+            total = int(nnz.sum())
+            cols = stored.ints(entry["cols"], f"{field}.cols", (total,), high=max(n - 1, 0),
+                               dtype=np.int32)
+            vals = stored.floats(entry["vals"], f"{field}.vals", (total,), low=0.0)
             valid = np.arange(width)[None, :] < nnz[:, None]
             self._cols[a] = np.zeros((n, width), dtype=np.int32)
             self._vals[a] = np.zeros((n, width))
-            self._cols[a][valid] = np.array(entry["cols"], dtype=np.int32)
-            self._vals[a][valid] = np.array(entry["vals"], dtype=np.float64)
+            self._cols[a][valid] = cols
+            self._vals[a][valid] = vals
+            rows = np.sort(np.where(valid, self._cols[a], -1 - np.arange(width)), axis=1)
+            if (rows[:, 1:] == rows[:, :-1]).any():
+                raise InvalidSnapshot("a row names a next state twice", field=f"{field}.cols")
         self._refresh()
         return self
 

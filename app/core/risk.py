@@ -34,8 +34,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from app.core import _stored as stored
 from app.core._arrays import ensure_capacity
 from app.core.belief import Belief
+from app.core.errors import InvalidSnapshot
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -132,33 +134,29 @@ class OutcomeCounts:
                 data: dict[str, Any]) -> OutcomeCounts:
         """Rebuild from :meth:`snapshot` output, checking every index and count."""
         self = cls(n_actions, n_criteria, max_states)
-        tries = _counts(data["tries"])
+        tries = stored.ints(data["tries"], "outcomes.tries")
         n = tries.shape[0] if tries.ndim == 2 else -1
         if tries.shape != (n, n_actions) or n > max_states:
-            raise ValueError("outcome tries must be states x actions")
-        failures = _counts(data["failures"]).reshape(n, n_actions, n_criteria)
-        rows = _counts(data["rows"]).ravel()
-        cols = _counts(data["cols"]).ravel()
-        moves = _counts(data["moves"]).ravel()
-        if not rows.shape == cols.shape == moves.shape:
-            raise ValueError("outcome moves disagree on their length")
-        if (tries < 0).any() or (failures < 0).any() or (moves < 1).any():
-            raise ValueError("outcome counts must be non-negative")
-        if rows.size and (rows.min() < 0 or rows.max() >= n * n_actions or cols.min() < 0
-                          or cols.max() >= n):
-            raise ValueError("outcome moves name a state or action out of range")
+            raise InvalidSnapshot("outcome tries must be states x actions",
+                                  field="outcomes.tries")
+        failures = stored.ints(data["failures"], "outcomes.failures", (n, n_actions, n_criteria))
+        rows = stored.ints(data["rows"], "outcomes.rows", high=max(n * n_actions - 1, 0)).ravel()
+        cols = stored.ints(data["cols"], "outcomes.cols", rows.shape, high=max(n - 1, 0))
+        moves = stored.ints(data["moves"], "outcomes.moves", rows.shape, low=1)
         moved = np.zeros(n * n_actions, dtype=np.int64)
         np.add.at(moved, rows, moves)
         if (moved.reshape(n, n_actions) + failures.sum(axis=2) != tries).any():
-            raise ValueError("outcome tries are not the sum of moves and failures")
+            raise InvalidSnapshot("outcome tries are not the sum of moves and failures",
+                                  field="outcomes.tries")
         self._tries, self._failures, self._n = tries, failures, n
         self._rows, self._cols, self._moves, self._m = rows, cols, moves, rows.size
         self._where = {int(r) * max_states + int(c): i
                        for i, (r, c) in enumerate(zip(rows, cols, strict=True))}
         if len(self._where) != rows.size:
-            raise ValueError("outcome moves repeat a (state, action, next state)")
+            raise InvalidSnapshot("outcome moves repeat a (state, action, next state)",
+                                  field="outcomes.rows")
         self._n_failures = int(failures.sum())
-        self.version = int(data["version"])
+        self.version = stored.integer(data["version"], "outcomes.version")
         return self
 
 
@@ -243,14 +241,6 @@ def choose(total: FloatArray, proposed_bin: int, limit: float, safe_step: int) -
     allowed = np.flatnonzero(total <= limit)
     distance = np.abs(allowed - proposed_bin) * 2 - (np.sign(allowed - proposed_bin) == safe_step)
     return int(allowed[int(distance.argmin())])
-
-
-def _counts(data: Any) -> IntArray:
-    """Stored counts as int64, refusing anything that is not already whole numbers."""
-    array = np.asarray(data)
-    if array.dtype.kind not in "iu":
-        raise ValueError("outcome counts must be integers")
-    return array.astype(np.int64)
 
 
 def _read_only(view: npt.NDArray[Any]) -> npt.NDArray[Any]:

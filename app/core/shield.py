@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from app.core import _stored as stored
 from app.core import actions, reviser, risk
 from app.core._arrays import ensure_capacity
 from app.core.belief import Belief, recognise
@@ -677,9 +678,14 @@ class Shield:
             raise InvalidSnapshot(f"expected snapshot format {SNAPSHOT_FORMAT}", field="format")
         try:
             return cls._restore(data)
+        except InvalidConfig as error:
+            raise InvalidSnapshot(f"its configuration: {error.message}",
+                                  field=f"config.{error.field}" if error.field else "config"
+                                  ) from error
         except ShieldError:
             raise
-        except (KeyError, TypeError, ValueError, IndexError) as error:
+        except (KeyError, TypeError, ValueError, IndexError, OverflowError,
+                AttributeError) as error:
             raise InvalidSnapshot(f"snapshot is incomplete or inconsistent: {error!r}") from error
 
     @classmethod
@@ -688,10 +694,12 @@ class Shield:
         cfg = self.config
         counters = data["counters"]
         self.counters = Counters(
-            steps=int(counters["steps"]),
-            episodes=int(counters["episodes"]),
-            model_version=int(counters["model_version"]),
-            interventions={c.name: int(counters["interventions"][c.name]) for c in cfg.criteria},
+            steps=stored.integer(counters["steps"], "counters.steps"),
+            episodes=stored.integer(counters["episodes"], "counters.episodes"),
+            model_version=stored.integer(counters["model_version"], "counters.model_version"),
+            interventions={c.name: stored.integer(counters["interventions"][c.name],
+                                                  f"counters.interventions.{c.name}")
+                           for c in cfg.criteria},
         )
         self._rng.bit_generator.state = data["rng"]
         limit = cfg.limits.max_states
@@ -710,18 +718,31 @@ class Shield:
         if self.transitions.n_states != n or self.flags.flags.shape[0] != n:
             raise InvalidSnapshot("states, matrices and flags disagree on the state count")
         self._restore_risk(data, n)
-        self.streams = {}
-        for name, s in data["streams"].items():
-            belief = None
-            if s["index"] is not None:
-                belief = Belief(np.array(s["index"], dtype=np.int64),
-                                np.array(s["prob"], dtype=np.float64))
-            recent = [np.array(z, dtype=np.float64).reshape(self._zdim)
-                      for z in s.get("recent", [])]
-            self.streams[str(name)] = StreamState(
-                belief, int(s["applied_bin"]), int(s["proposed_bin"]), int(s["step"]), recent
-            )
+        self.streams = {str(name): self._restore_stream(f"streams.{name}", s, n)
+                        for name, s in data["streams"].items()}
         return self
+
+    def _restore_stream(self, field: str, data: dict[str, Any], n: int) -> StreamState:
+        """One stream's state, its belief and bins checked against the model's sizes."""
+        if not 1 <= len(field) - len("streams.") <= 128:
+            raise InvalidSnapshot("stream names have 1 to 128 characters", field=field)
+        belief = None
+        if data["index"] is not None:
+            index = stored.ints(data["index"], f"{field}.index", high=n - 1).ravel()
+            prob = stored.floats(data["prob"], f"{field}.prob", index.shape, low=0.0,
+                                 high=1.0)
+            if not index.size or np.unique(index).size != index.size:
+                raise InvalidSnapshot("a belief names distinct states", field=f"{field}.index")
+            belief = Belief(index, prob)
+        q = self.config.action.n_bins
+        recent = [stored.floats(z, f"{field}.recent.{i}", (self._zdim,))
+                  for i, z in enumerate(data.get("recent", []))]
+        return StreamState(belief,
+                           stored.integer(data["applied_bin"], f"{field}.applied_bin",
+                                          high=q - 1),
+                           stored.integer(data["proposed_bin"], f"{field}.proposed_bin",
+                                          high=q - 1),
+                           stored.integer(data["step"], f"{field}.step"), recent)
 
     def _restore_risk(self, data: dict[str, Any], n: int) -> None:
         """The outcome counts and the risk table; a format-2 snapshot (from before the risk
@@ -735,12 +756,10 @@ class Shield:
             return
         self.outcomes = risk.OutcomeCounts.restore(q, n_c, cfg.limits.max_states,
                                                    data["outcomes"])
-        table = np.array(data["risk"]["table"], dtype=np.float64)
-        if self.outcomes.n_states != n or table.shape != (n, q, n_c):
-            raise InvalidSnapshot("outcomes, risk table and states disagree on their sizes",
-                                  field="risk")
-        if not (np.isfinite(table).all() and (table >= 0).all() and (table <= 1).all()):
-            raise InvalidSnapshot("risks must be probabilities", field="risk.table")
-        self._risk_table = table
-        self._risk_version = int(data["risk"]["version"])
+        if self.outcomes.n_states != n:
+            raise InvalidSnapshot("outcomes and states disagree on the state count",
+                                  field="outcomes.tries")
+        self._risk_table = stored.floats(data["risk"]["table"], "risk.table", (n, q, n_c),
+                                         low=0.0, high=1.0)
+        self._risk_version = stored.integer(data["risk"]["version"], "risk.version")
 

@@ -21,8 +21,10 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from app.core import _stored as stored
 from app.core.belief import Belief
 from app.core.config import TransitionConfig
+from app.core.errors import InvalidSnapshot
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -207,8 +209,12 @@ class DenseTransitions:
     def restore(
         cls, n_actions: int, config: TransitionConfig, data: dict[str, Any]
     ) -> DenseTransitions:
-        """Rebuild from :meth:`snapshot` output."""
+        """Rebuild from :meth:`snapshot` output, every part checked."""
         self = cls(n_actions, config)
-        self.P = np.array(data["P"], dtype=np.float64)
-        self.F_o = np.array(data["F_o"], dtype=np.float64)
+        P = stored.floats(data["P"], "transitions.P", low=0.0)
+        n = P.shape[1] if P.ndim == 3 else -1
+        if P.shape != (n_actions, n, n):
+            raise InvalidSnapshot("expected one square matrix per action", field="transitions.P")
+        self.P = P
+        self.F_o = stored.floats(data["F_o"], "transitions.F_o", (n_actions, n), low=0.0)
         return self

@@ -9,13 +9,19 @@ from __future__ import annotations
 
 import io
 import json
+import math
+import zipfile
+import zlib
 from typing import Any
 
 import numpy as np
 
-from app.core import Shield
+from app.core import InvalidSnapshot, Shield
 
 ARRAY = "__array__"
+# The dtypes a snapshot's arrays may have: what the core writes (float64, int64, int32).
+DTYPES = frozenset({"<f8", "<i8", "<i4"})
+DEFAULT_LIMIT = 256 * 2**20  # [bytes] of arrays in one snapshot
 
 
 def to_json(value: Any) -> Any:
@@ -31,16 +37,43 @@ def to_json(value: Any) -> Any:
     return value
 
 
-def from_json(value: Any) -> Any:
-    """Invert :func:`to_json`."""
-    if isinstance(value, dict):
-        if ARRAY in value:
-            data = np.array(value["data"], dtype=np.dtype(value[ARRAY]))
-            return data.reshape(value["shape"])
-        return {k: from_json(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [from_json(v) for v in value]
-    return value
+def from_json(value: Any, limit: int = DEFAULT_LIMIT) -> Any:
+    """Invert :func:`to_json`. Arrays are checked before they are built: a dtype from
+    :data:`DTYPES`, a shape that matches the data, at most ``limit`` bytes in all; anything
+    else raises :class:`InvalidSnapshot` naming the array."""
+    budget = [limit]
+
+    def build(value: Any, path: str) -> Any:
+        if isinstance(value, dict):
+            if ARRAY in value:
+                return _array(value, path, budget)
+            return {k: build(v, f"{path}.{k}" if path else str(k)) for k, v in value.items()}
+        if isinstance(value, list):
+            return [build(v, f"{path}.{i}") for i, v in enumerate(value)]
+        return value
+
+    return build(value, "")
+
+
+def _array(tagged: dict[str, Any], path: str, budget: list[int]) -> np.ndarray:
+    dtype, shape, data = tagged.get(ARRAY), tagged.get("shape"), tagged.get("data")
+    if dtype not in DTYPES:
+        raise InvalidSnapshot(f"array dtype {dtype!r} is not one of {sorted(DTYPES)}",
+                              field=path)
+    if not (isinstance(shape, list) and all(isinstance(d, int) and not isinstance(d, bool)
+                                            and d >= 0 for d in shape)):
+        raise InvalidSnapshot("an array's shape is a list of sizes", field=path)
+    if not isinstance(data, list) or len(data) != math.prod(shape):
+        raise InvalidSnapshot("an array's data must hold as many numbers as its shape",
+                              field=path)
+    budget[0] -= len(data) * np.dtype(dtype).itemsize
+    if budget[0] < 0:
+        raise InvalidSnapshot("the snapshot's arrays exceed the size limit", field=path)
+    try:
+        return np.array(data, dtype=np.dtype(dtype)).reshape(shape)
+    except (TypeError, ValueError, OverflowError) as error:
+        raise InvalidSnapshot(f"an array holds something else than numbers: {error}",
+                              field=path) from error
 
 
 def to_npz(snapshot: dict[str, Any]) -> bytes:
@@ -63,22 +96,57 @@ def to_npz(snapshot: dict[str, Any]) -> bytes:
     return buffer.getvalue()
 
 
-def from_npz(blob: bytes) -> dict[str, Any]:
-    """Invert :func:`to_npz`."""
-    with np.load(io.BytesIO(blob), allow_pickle=False) as archive:
-        meta = json.loads(str(archive["meta"]))
+def from_npz(blob: bytes, limit: int = DEFAULT_LIMIT) -> dict[str, Any]:
+    """Invert :func:`to_npz`. Every member's header is read first: a dtype from
+    :data:`DTYPES` (text for ``meta`` alone), a size that its stored bytes can fill, at most
+    ``limit`` bytes inflated in all; a damaged archive or anything else raises
+    :class:`InvalidSnapshot`."""
+    try:
+        with zipfile.ZipFile(io.BytesIO(blob)) as archive:
+            sizes = {info.filename: info.file_size for info in archive.infolist()}
+            if sum(sizes.values()) > limit:
+                raise InvalidSnapshot("the archive inflates beyond the size limit",
+                                      field="body")
+            for name in sizes:
+                _check_member(archive, name)
+        with np.load(io.BytesIO(blob), allow_pickle=False) as arrays:
+            meta = json.loads(str(arrays["meta"]))
+            members = {name: arrays[name] for name in arrays.files if name != "meta"}
+    except InvalidSnapshot:
+        raise
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError,
+            RecursionError, UnicodeDecodeError) as error:
+        raise InvalidSnapshot(f"unreadable archive: {error}", field="body") from error
 
-        def fill(value: Any) -> Any:
-            if isinstance(value, dict):
-                if ARRAY in value and len(value) == 1:
-                    return archive[value[ARRAY]]
-                return {k: fill(v) for k, v in value.items()}
-            if isinstance(value, list):
-                return [fill(v) for v in value]
-            return value
+    def fill(value: Any) -> Any:
+        if isinstance(value, dict):
+            if ARRAY in value and len(value) == 1:
+                if value[ARRAY] not in members:
+                    raise InvalidSnapshot("the archive lacks an array", field=str(value[ARRAY]))
+                return members[value[ARRAY]]
+            return {k: fill(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [fill(v) for v in value]
+        return value
 
-        result: dict[str, Any] = fill(meta)
-        return result
+    result: dict[str, Any] = fill(meta)
+    return result
+
+
+def _check_member(archive: zipfile.ZipFile, name: str) -> None:
+    """Refuse a member whose header names a dtype not allowed or more data than it holds."""
+    key = name.removesuffix(".npy")
+    with archive.open(name) as member:
+        version = np.lib.format.read_magic(member)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(member)
+        else:
+            shape, _, dtype = np.lib.format.read_array_header_2_0(member)
+    allowed = dtype.kind == "U" if key == "meta" else dtype.str in DTYPES
+    if not allowed:
+        raise InvalidSnapshot(f"array dtype {dtype.str!r} is not allowed", field=key)
+    if math.prod(shape) * dtype.itemsize > archive.getinfo(name).file_size:
+        raise InvalidSnapshot("an array's header claims more data than it holds", field=key)
 
 
 def readable(shield: Shield, tpm: str = "sparse", action: int | None = None,

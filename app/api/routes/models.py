@@ -100,16 +100,17 @@ def get_default_model(
 async def put_model(name: NamePath, request: Request, registry: RegistryDep) -> dict[str, Any]:
     """Create or replace a model from a snapshot (the JSON of GET, or its .npz)."""
     blob = await request.body()
-    try:
-        if NPZ in request.headers.get("content-type", ""):
-            snapshot = codec.from_npz(blob)
-        else:
+    limit = request.app.state.settings.max_snapshot_bytes
+    if NPZ in request.headers.get("content-type", ""):
+        snapshot = codec.from_npz(blob, limit)
+    else:
+        try:
             document = json.loads(blob)
-            if not isinstance(document, dict) or "exact" not in document:
-                raise InvalidSnapshot("the body needs the 'exact' state of GET", field="exact")
-            snapshot = codec.from_json(document["exact"])
-    except (ValueError, KeyError, OSError) as error:
-        raise InvalidSnapshot(f"unreadable snapshot: {error}", field="body") from error
+        except (ValueError, RecursionError) as error:
+            raise InvalidSnapshot(f"unreadable snapshot: {error}", field="body") from error
+        if not isinstance(document, dict) or "exact" not in document:
+            raise InvalidSnapshot("the body needs the 'exact' state of GET", field="exact")
+        snapshot = codec.from_json(document["exact"], limit)
     return summary(registry.restore(name, snapshot))
 
 
