@@ -41,6 +41,16 @@ class ModelExists(ShieldError):
     code = "model_exists"
 
 
+class ModelQuarantined(ShieldError):
+    """The model's files were damaged at start-up: it is set aside, the others serve."""
+
+    code = "model_quarantined"
+
+
+class DamagedModel(Exception):
+    """A model's files cannot be read back into the model they recorded."""
+
+
 class InvalidName(ShieldError):
     """A model name must match ``[a-z0-9][a-z0-9_-]{0,63}``."""
 
@@ -97,6 +107,7 @@ class ModelRegistry:
         self.snapshot_every = snapshot_every
         self.default_config = default_config or ShieldConfig()
         self._models: dict[str, Model] = {}
+        self.quarantined: dict[str, str] = {}  # name -> why its files could not be loaded
         self._lock = threading.Lock()  # the name -> model map
         self._stop = threading.Event()
         self._syncer: threading.Thread | None = None
@@ -105,18 +116,31 @@ class ModelRegistry:
     # --- life cycle -----------------------------------------------------------------------
 
     def open(self) -> None:
-        """Load every stored model (snapshot + journal replay) and make sure 'default' exists."""
+        """Load every stored model (snapshot + journal replay) and make sure 'default' exists.
+
+        A model whose files are damaged is set aside (:attr:`quarantined`, logged as an
+        error): it answers :class:`ModelQuarantined` while every other model serves, and no
+        fresh model takes its place or its files.
+        """
         if self.data_dir is not None:
             root = self.data_dir / "models"
             root.mkdir(parents=True, exist_ok=True)
             for directory in sorted(p for p in root.iterdir() if p.is_dir()):
-                if (directory / "config.json").exists():
-                    self._models[directory.name] = self._load(directory)
+                try:
+                    model = self._load(directory)
+                except Exception as error:  # any damage to any file: set this model aside
+                    reason = f"{type(error).__name__}: {error}"
+                    log.error("model %r is quarantined, its files in %s are kept as they are: "
+                              "%s", directory.name, directory, reason)
+                    self.quarantined[directory.name] = reason
+                    continue
+                if model is not None:
+                    self._models[directory.name] = model
             if self.fsync == "interval":
                 self._syncer = threading.Thread(target=self._sync_loop, name="journal-sync",
                                                  daemon=True)
                 self._syncer.start()
-        if DEFAULT_MODEL not in self._models:
+        if DEFAULT_MODEL not in self._models and DEFAULT_MODEL not in self.quarantined:
             self.create(DEFAULT_MODEL, self.default_config)
         self.ready = True
 
@@ -139,23 +163,34 @@ class ModelRegistry:
                 if model.store is not None:
                     model.store.sync()
 
-    def _load(self, directory: Path) -> Model:
+    def _load(self, directory: Path) -> Model | None:
+        """The model stored in ``directory`` (None for a directory that holds no model)."""
         store = ModelStore(directory, self.fsync)
+        if not store.config_path.exists():
+            if store.snapshot_path.exists() or store.journal_path.exists():
+                raise DamagedModel("config.json is missing beside the model's other files")
+            return None
         blob = store.read_snapshot()
         if blob is not None:
             shield = Shield.from_snapshot(codec.from_npz(blob))
+            if not store.journal_path.exists():
+                log.error("%s: journal.log is missing; steps learned after the snapshot "
+                          "(version %d), if any, are lost", directory.name,
+                          shield.counters.model_version)
         else:
             shield = Shield(ShieldConfig.from_stored(store.read_config()))
         replayed = 0
         for record in store.records():
             if record["v"] <= shield.counters.model_version:
                 continue  # already in the snapshot
+            start = record["v"] - len(record["steps"])
+            if start != shield.counters.model_version:
+                raise DamagedModel(f"the journal goes on from version {start}, the model is "
+                                   f"at version {shield.counters.model_version} (a snapshot "
+                                   "missing or older than the journal)")
             for step in record["steps"]:
                 shield.step(**vars(Step.from_journal(step)))
                 replayed += 1
-            if shield.counters.model_version != record["v"]:
-                log.error("%s: replay reached version %d, the journal says %d", directory.name,
-                          shield.counters.model_version, record["v"])
         log.info("model %r: %d states, version %d (%d journaled steps replayed)",
                  directory.name, shield.n_states, shield.counters.model_version, replayed)
         return Model(directory.name, shield, store, since_snapshot=replayed)
@@ -169,11 +204,20 @@ class ModelRegistry:
         try:
             return self._models[name]
         except KeyError:
+            self._refuse_quarantined(name)
             raise UnknownModel(f"no model named {name!r}", field="name") from None
+
+    def _refuse_quarantined(self, name: str) -> None:
+        if name in self.quarantined:
+            raise ModelQuarantined(
+                f"model {name!r} was set aside at start-up, its files damaged "
+                f"({self.quarantined[name]}); repair or move its directory and restart",
+                field="name")
 
     def create(self, name: str, config: ShieldConfig) -> Model:
         """A new, empty model (its configuration is stored at once)."""
         check_name(name)
+        self._refuse_quarantined(name)
         with self._lock:
             if name in self._models:
                 raise ModelExists(f"a model named {name!r} exists", field="name")
@@ -186,6 +230,7 @@ class ModelRegistry:
     def restore(self, name: str, snapshot: dict[str, Any]) -> Model:
         """Create or replace a model from a snapshot (the snapshot is stored at once)."""
         check_name(name)
+        self._refuse_quarantined(name)
         shield = Shield.from_snapshot(snapshot)
         with self._lock:
             old = self._models.get(name)

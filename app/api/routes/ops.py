@@ -19,9 +19,11 @@ def healthz() -> dict[str, str]:
 
 @router.get("/readyz")
 def readyz(registry: RegistryDep) -> JSONResponse:
-    """The models are loaded (no token needed)."""
+    """The models are loaded (no token needed); models set aside for damaged files are
+    named with the reason (the others serve)."""
     ready = registry.ready
-    body = {"status": "ready" if ready else "loading", "models": len(registry.names())}
+    body = {"status": "ready" if ready else "loading", "models": len(registry.names()),
+            "quarantined": registry.quarantined}
     return JSONResponse(body, status_code=200 if ready else 503)
 
 
