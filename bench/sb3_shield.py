@@ -29,8 +29,14 @@ from stable_baselines3.common.noise import NormalActionNoise
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from app.core import ReviserConfig, ShieldConfig
 from client.shield import ShieldWrapper  # noqa: E402
 from client.shield.sb3 import AppliedActionReplayBuffer  # noqa: E402
+
+# The car-following shield, its warm-up counted in steps (the learner's first 1000 are random
+# actions, then its episodes are few and long): it learns from the first step, revises after.
+STEPS_WARMUP = ShieldConfig(reviser=ReviserConfig(activate_after_episodes=0))
+WARMUP_STEPS = 5000
 
 
 class Failures(BaseCallback):
@@ -58,7 +64,8 @@ def train(seed: int, steps: int, shielded: bool) -> dict[str, Any]:
     env: gym.Env[Any, Any] = gym.make("client.sim:CarFollowing-v0")
     extra: dict[str, Any] = {}
     if shielded:
-        env = ShieldWrapper(env, stream=f"td3-{seed}")
+        env = ShieldWrapper(env, config=STEPS_WARMUP, warmup_steps=WARMUP_STEPS,
+                            stream=f"td3-{seed}")
         extra["replay_buffer_class"] = AppliedActionReplayBuffer
     noise = NormalActionNoise(mean=np.zeros(1), sigma=np.full(1, 0.2))
     model = TD3("MlpPolicy", env, action_noise=noise, learning_starts=1000, seed=seed,

@@ -3,7 +3,8 @@
 A controller that pumps energy into the swing (full torque along the angular velocity) spins
 the pendulum ever faster. The shield is told of an overspeed by a failure predicate, at any
 step (the episode goes on), and learns which torques lead there. Prints the steps spent over
-the limit per 1000 steps, with and without the shield, in the episodes after a warm-up.
+the limit per 1000 steps, with and without the shield, in the episodes after a warm-up in which
+the shield learns without revising.
 
     python examples/pendulum_overspeed.py [--episodes 60]
 """
@@ -16,6 +17,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from app.core import ReviserConfig, ShieldConfig
 from client.shield import ShieldWrapper, config_for
 
 LIMIT = 6.0  # [rad/s]
@@ -56,7 +58,9 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     plain = gym.make("Pendulum-v1")
-    config = config_for(plain, {"overspeed_ccw": "decrease", "overspeed_cw": "increase"})
+    revising = ShieldConfig(reviser=ReviserConfig(activate_after_episodes=args.warmup))
+    config = config_for(plain, {"overspeed_ccw": "decrease", "overspeed_cw": "increase"},
+                        base=revising)
     shielded = ShieldWrapper(gym.make("Pendulum-v1"), config=config, failure=overspeed)
     alone = run(plain, args.episodes, args.warmup, args.seed)
     with_shield = run(shielded, args.episodes, args.warmup, args.seed)

@@ -19,8 +19,14 @@ from stable_baselines3 import TD3
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.noise import NormalActionNoise
 
+from app.core import ReviserConfig, ShieldConfig
 from client.shield import ShieldWrapper
 from client.shield.sb3 import AppliedActionReplayBuffer
+
+# The car-following shield, its warm-up counted in steps (the learner's first 1000 are random
+# actions, then its episodes are few and long): it learns from the first step, revises after.
+STEPS_WARMUP = ShieldConfig(reviser=ReviserConfig(activate_after_episodes=0))
+WARMUP_STEPS = 5000
 
 
 class Failures(BaseCallback):
@@ -42,7 +48,7 @@ def train(steps: int, seed: int, shielded: bool) -> Counter[str]:
     env: gym.Env[Any, Any] = gym.make("client.sim:CarFollowing-v0")
     extra: dict[str, Any] = {}
     if shielded:
-        env = ShieldWrapper(env)
+        env = ShieldWrapper(env, config=STEPS_WARMUP, warmup_steps=WARMUP_STEPS)
         extra["replay_buffer_class"] = AppliedActionReplayBuffer
     noise = NormalActionNoise(mean=np.zeros(1), sigma=np.full(1, 0.2))
     model = TD3("MlpPolicy", env, action_noise=noise, learning_starts=1000, seed=seed,

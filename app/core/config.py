@@ -212,15 +212,16 @@ class ReviserConfig:
     """The action reviser and its activation.
 
     ``method`` ``risk`` (the default) revises by the failure risk of each action over a
-    horizon (:class:`RiskConfig`, :mod:`app.core.risk`); it needs no warm-up, since an action
-    reads a risk only where failures were counted, so it acts from the first episode.
-    ``paper`` revises by the paper's flags on predicted states (Algs. 1-3, with every switch
-    below) after ``activate_after_episodes`` (the paper's xi = 50, see
-    :meth:`ShieldConfig.paper`). ``seed`` drives the paper reviser's exploration noise.
+    horizon (:class:`RiskConfig`, :mod:`app.core.risk`); ``paper`` by the paper's flags on
+    predicted states (Algs. 1-3, with every switch below; :meth:`ShieldConfig.paper`). Either
+    revises only after ``activate_after_episodes`` episodes (the paper's xi = 50), learning
+    from the controller's own actions until then: acting from the first episode, the risk
+    reviser learned mostly from its own early revisions and over-braked on two of three
+    held-out worlds (docs/risk-reviser.md). ``seed`` drives the paper reviser's noise.
     """
 
     method: Literal["paper", "risk"] = "risk"
-    activate_after_episodes: int = 0  # xi; the paper's 50 in ShieldConfig.paper()
+    activate_after_episodes: int = 50  # xi
     noise_k: float = 0.001  # K
     noise: Literal["variance", "std"] = "variance"  # A7: V = a_max / max(1, K * episode)
     horizon: int = 1  # k, prediction steps

@@ -20,6 +20,12 @@ from client.sim.lead import synthetic
 EDGE = {"edge": "decrease"}  # pushing less is safer
 
 
+def ledge_config(criteria: dict[str, str] = EDGE) -> ShieldConfig:
+    """The shield for :class:`Ledge`, revising from its sixth episode."""
+    return config_for(Ledge(), criteria,
+                      base=ShieldConfig(reviser=ReviserConfig(activate_after_episodes=5)))
+
+
 class Ledge(gym.Env[np.ndarray, np.ndarray]):
     """A point pushed along [0, 1] by its action; beyond 0.9 it falls off ("edge", the episode
     ends); ``bumps`` also reports a "bump" above 0.7 without ending the episode."""
@@ -62,7 +68,7 @@ def pushing(episodes: int, env: gym.Env[Any, Any], seed: int = 0) -> list[dict[s
 
 def test_the_shield_wrapper_learns_a_ledge_and_keeps_the_point_on_it() -> None:
     alone = sum(i["event"] == "edge" for i in pushing(60, Ledge()))
-    env = ShieldWrapper(Ledge(), criteria=EDGE)
+    env = ShieldWrapper(Ledge(), config=ledge_config())
     infos = pushing(60, env)
     assert sum(i["event"] == "edge" for i in infos) < alone / 2
     revised = [i for i in infos if i["shield"]["revised"]]
@@ -134,7 +140,8 @@ def test_vectorised_copies_write_streams_of_their_own() -> None:
 
 
 def test_a_failure_that_does_not_end_the_episode_is_learned() -> None:
-    env = ShieldWrapper(Ledge(bumps=True), criteria={"edge": "decrease", "bump": "decrease"})
+    env = ShieldWrapper(Ledge(bumps=True),
+                        config=ledge_config({"edge": "decrease", "bump": "decrease"}))
     infos = pushing(5, env)
     bumps = sum(i["event"] == "bump" for i in infos)
     assert bumps > 0
@@ -163,7 +170,7 @@ def test_the_same_seed_gives_the_same_shield_and_evaluation_learns_nothing() -> 
 
     assert decisions(3) == decisions(3)
     assert decisions(3) != decisions(4)
-    env = ShieldWrapper(Ledge(), criteria=EDGE)
+    env = ShieldWrapper(Ledge(), config=ledge_config())
     pushing(20, env)
     env.set_evaluation(True)
     version = env.shield.shield.counters.model_version  # type: ignore[attr-defined]
@@ -173,7 +180,7 @@ def test_the_same_seed_gives_the_same_shield_and_evaluation_learns_nothing() -> 
 
 
 def test_warm_up_in_steps_reports_but_does_not_revise() -> None:
-    env = ShieldWrapper(Ledge(), criteria=EDGE, warmup_steps=10**6)
+    env = ShieldWrapper(Ledge(), config=ledge_config(), warmup_steps=10**6)
     infos = pushing(40, env)
     would = [i for i in infos if i["shield"]["revised"]]
     assert would and all(i["shield"]["shadow"] for i in would)
@@ -219,7 +226,7 @@ def test_sb3_learns_from_the_applied_action() -> None:
             self.revised += info["shield"]["revised"]
             return True
 
-    env = ShieldWrapper(Ledge(), criteria=EDGE)
+    env = ShieldWrapper(Ledge(), config=ledge_config())
     pushing(40, env)  # the shield has met the ledge before the learner starts
     pushy = NormalActionNoise(mean=np.array([0.6]), sigma=np.array([0.3]))  # towards the ledge
     model = TD3("MlpPolicy", env, learning_starts=50, train_freq=1, seed=0, action_noise=pushy,
