@@ -36,13 +36,25 @@ class Unauthorized(ShieldError):
     code = "unauthorized"
 
 
+class InvalidQuery(ShieldError):
+    """A query parameter names something the model does not have (an action bin)."""
+
+    code = "invalid_query"
+
+
+class NotFound(ShieldError):
+    """A path names something the model does not have (a state)."""
+
+    code = "not_found"
+
+
 class TooLarge(ShieldError):
     """A body or batch over the configured limit."""
 
     code = "too_large"
 
 
-STATUS.update({Unauthorized: 401, TooLarge: 413})
+STATUS.update({Unauthorized: 401, TooLarge: 413, InvalidQuery: 422, NotFound: 404})
 
 
 def error_body(code: str, message: str, field: str | None = None) -> dict[str, Any]:
@@ -111,6 +123,9 @@ def _code_of(kind: str, where: str) -> str:
 
 def http_error(_: Request, error: Exception) -> JSONResponse:
     assert isinstance(error, HTTPException)
+    if error.status_code == 400:  # FastAPI could not read the body (UTF-8, nesting): not JSON
+        return JSONResponse(error_body("invalid_json", f"the body is not JSON: {error.detail}"),
+                            status_code=422)
     code = {404: "not_found", 405: "method_not_allowed"}.get(error.status_code, "http_error")
     return JSONResponse(error_body(code, str(error.detail)), status_code=error.status_code,
                         headers=error.headers)

@@ -33,7 +33,7 @@ class BodyLimit:
             await self._refuse(send, limit)
             return
         seen = 0
-        refused = False
+        refused = answered = False
 
         async def limited() -> Message:
             nonlocal seen, refused
@@ -45,10 +45,19 @@ class BodyLimit:
                     raise _TooLarge
             return message
 
+        async def guarded(message: Message) -> None:
+            nonlocal answered
+            if refused:  # whatever the app makes of the interrupted body, the answer is 413
+                if not answered:
+                    answered = True
+                    await self._refuse(send, limit)
+                return
+            await send(message)
+
         try:
-            await self.app(scope, limited, send)
+            await self.app(scope, limited, guarded)
         except _TooLarge:
-            if refused:
+            if not answered:
                 await self._refuse(send, limit)
 
     async def _refuse(self, send: Send, limit: int) -> None:

@@ -1,4 +1,4 @@
-"""One e-FSM model and its action reviser, driven one step at a time (spec/api.md "One step").
+"""One e-FSM model and its action reviser, driven one step at a time (docs/api.md, "One step").
 
 :class:`Shield` is what the service holds per model: it clusters the observation, recognises
 the belief, learns the transition of each stream, flags unfavourable states and revises the
@@ -55,7 +55,7 @@ class Candidate:
 
 @dataclass(frozen=True)
 class Decision:
-    """The decision record of one step (spec/api.md)."""
+    """The decision record of one step (docs/api.md)."""
 
     action: float | None
     proposed: float | None
@@ -257,7 +257,7 @@ class Shield:
         learn: bool = True,
         shadow: bool = False,
     ) -> Decision:
-        """Learn from one observation and answer the proposed action (spec/api.md order)."""
+        """Learn from one observation and answer the proposed action (docs/api.md, "One step")."""
         return self.apply(
             self.validate(
                 observation,

@@ -368,4 +368,4 @@ def test_a_state_reports_its_flag_failures_and_next_states(client: TestClient) -
     assert state["visits"] >= 1 and len(state["next"]) == 20
     assert all(len(a["states"]) <= 2 for a in state["next"])
     missing = client.get("/models/default/states/999")
-    assert missing.status_code == 422 and missing.json()["error"]["field"] == "index"
+    assert missing.status_code == 404 and missing.json()["error"]["field"] == "index"

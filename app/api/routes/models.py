@@ -9,6 +9,7 @@ from fastapi import APIRouter, Depends, Header, Query, Request, Response, status
 from fastapi.responses import JSONResponse
 
 from app.api.deps import RegistryDep, require_token
+from app.api.errors import InvalidQuery
 from app.api.routes.revise import ERRORS, NamePath
 from app.api.schemas import ModelCreate, ModelList, ModelSummary
 from app.core import InvalidConfig, InvalidSnapshot, ShieldConfig
@@ -66,7 +67,7 @@ def get_model(
     with model.lock:
         shield = model.shield
         if action is not None and action >= shield.config.action.n_bins:
-            raise InvalidConfig(f"action bin {action} does not exist", field="action")
+            raise InvalidQuery(f"action bin {action} does not exist", field="action")
         if format == "npz" or (format is None and accept is not None and NPZ in accept):
             return Response(codec.to_npz(shield.snapshot()), media_type=NPZ, headers={
                 "Content-Disposition": f'attachment; filename="{name}.npz"'})

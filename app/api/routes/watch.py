@@ -14,9 +14,8 @@ from fastapi.responses import FileResponse, RedirectResponse, StreamingResponse
 
 from app.api.auth import given_token, token_ok
 from app.api.deps import RegistryDep, require_token
-from app.api.errors import Unauthorized
+from app.api.errors import NotFound, Unauthorized
 from app.api.routes.revise import ERRORS, NamePath
-from app.core import InvalidConfig
 
 STATIC = Path(__file__).resolve().parents[2] / "dashboard"
 QUEUE = 2000  # events kept for a slow watcher; past that new ones are dropped (and counted)
@@ -78,7 +77,7 @@ def state(name: NamePath, index: int, registry: RegistryDep,
     with model.lock:
         shield = model.shield
         if not 0 <= index < shield.n_states:
-            raise InvalidConfig(f"no state {index}", field="index")
+            raise NotFound(f"no state {index}", field="index")
         return {**shield.state_view(index),
                 "next": [{"bin": a, "states": [{"state": j, "prob": p} for j, p in row]}
                          for a, row in enumerate(shield.next_states(index, top))]}

@@ -1,0 +1,37 @@
+"""Inputs that used to get answers outside the documented table (issue #45, finding 8)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+from fastapi.testclient import TestClient
+
+JSON = {"content-type": "application/json"}
+
+
+def test_a_body_that_is_not_json_is_invalid_json(client: TestClient) -> None:
+    for body in (b'\xff\xfe{"observation": [1, 2, 3]}', b"[" * 1000 + b"]" * 1000):
+        r = client.post("/revise", content=body, headers=JSON)
+        assert r.status_code == 422
+        assert r.json()["error"] | {"message": ""} == {"code": "invalid_json", "message": "",
+                                                        "field": None}
+
+
+def test_a_streamed_body_over_the_limit_is_too_large(client: TestClient) -> None:
+    def chunks() -> Iterator[bytes]:
+        for _ in range(12):  # 12 MiB against the default limit of 8 MiB, no content-length
+            yield bytes(2**20)
+
+    r = client.post("/revise", content=chunks(), headers=JSON)
+    assert r.status_code == 413 and r.json()["error"]["code"] == "too_large"
+    assert client.get("/model", params={"tpm": "none"}).json()["steps"] == 0
+
+
+def test_an_action_bin_or_state_the_model_lacks_is_named(client: TestClient) -> None:
+    client.post("/revise", json={"observation": [10.0, 20.0, 10.0], "action": 0.1})
+    r = client.get("/models/default", params={"action": 20})
+    assert (r.status_code, r.json()["error"]["code"], r.json()["error"]["field"]) == (
+        422, "invalid_query", "action")
+    r = client.get("/models/default/states/5")
+    assert (r.status_code, r.json()["error"]["code"], r.json()["error"]["field"]) == (
+        404, "not_found", "index")
