@@ -32,7 +32,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the service; models load (journals replay) when the app starts."""
     settings = settings or get_settings()
     registry = ModelRegistry(settings.data_dir, settings.fsync, settings.snapshot_every,
-                             default_config(settings))
+                             default_config(settings), max_models=settings.max_models,
+                             max_states=settings.max_states)
 
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:

@@ -43,6 +43,11 @@ class Settings(BaseSettings):
         "arrays may take once read (422 invalid_snapshot).",
     )
     max_batch: int = Field(4096, ge=1, description="Most steps in one batch request.")
+    max_models: int = Field(1000, ge=1, description="Most models this server holds (409).")
+    max_states: int = Field(
+        100_000, ge=1, le=1_000_000,
+        description="The largest limits.max_states a model of this server may have (422).",
+    )
     snapshot_every: int = Field(
         50_000, ge=1, description="Steps of a model between two snapshots of it."
     )

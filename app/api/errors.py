@@ -15,7 +15,13 @@ from starlette.requests import HTTPConnection
 
 from app.api.auth import given_token, token_ok
 from app.core import InvalidConfig, InvalidSnapshot, ShieldError
-from app.service.registry import InvalidName, ModelExists, ModelQuarantined, UnknownModel
+from app.service.registry import (
+    InvalidName,
+    ModelExists,
+    ModelQuarantined,
+    TooManyModels,
+    UnknownModel,
+)
 
 log = logging.getLogger("app.api")
 POLICY_VIOLATION = 1008  # the WebSocket close code of a refused stream
@@ -24,6 +30,7 @@ STATUS: dict[type[ShieldError], int] = {
     UnknownModel: 404,
     ModelExists: 409,
     ModelQuarantined: 503,
+    TooManyModels: 409,
     InvalidName: 422,
     InvalidConfig: 422,
     InvalidSnapshot: 422,

@@ -315,17 +315,21 @@ class LimitsConfig:
     """Bounds that keep the cost of a step flat as the model grows.
 
     When ``max_states`` is reached no state is created any more: an observation that would
-    have made one joins its nearest state instead (counted as ``capacity_hits``).
+    have made one joins its nearest state instead (counted as ``capacity_hits``). A new stream
+    beyond ``max_streams`` makes the model forget the least recently used stream's previous
+    step (counted as ``streams_expired``), so that stream names cannot exhaust memory.
     ``belief_top_k`` truncates beliefs and propagated predictions to their k most likely
     states (exact when k >= the number of states).
     """
 
     max_states: int = 10_000
+    max_streams: int = 10_000
     belief_top_k: int = 16
     tpm_backend: Literal["lazy", "dense"] = "lazy"
 
     def __post_init__(self) -> None:
         _check(1 <= self.max_states <= 1_000_000, "max_states", "lies in [1, 1000000]")
+        _check(1 <= self.max_streams <= 1_000_000, "max_streams", "lies in [1, 1000000]")
         _check(self.belief_top_k >= 1, "belief_top_k", "must be >= 1")
 
 

@@ -129,6 +129,7 @@ class Counters:
     episodes: int = 0
     model_version: int = 0
     interventions: dict[str, int] = field(default_factory=dict)
+    streams_expired: int = 0  # streams forgotten to stay within max_streams
 
 
 class Shield:
@@ -358,7 +359,7 @@ class Shield:
         belief = recognise(update.sq_distances, self.clusterer.variances(),
                            cfg.limits.belief_top_k)
         # Eqs. 3-4 for the stream's previous step, under the action behind the transition
-        state = self.streams.setdefault(step.stream, StreamState())
+        state = self._stream(step.stream)
         self._learn_transition(state, belief, update.is_new, step.applied_action)
         # §5 flags on the recognised state
         recognised = belief.argmax()
@@ -391,6 +392,18 @@ class Shield:
         if decision.revised and not decision.shadow:
             self.counters.interventions[decision.verdict] += 1
         return decision
+
+    def _stream(self, name: str) -> StreamState:
+        """The stream's state, now its most recent; a new stream beyond ``max_streams``
+        makes the model forget the least recently used one (as if its episode had ended)."""
+        state = self.streams.pop(name, None)
+        if state is None:
+            state = StreamState()
+            if len(self.streams) >= self.config.limits.max_streams:
+                del self.streams[next(iter(self.streams))]
+                self.counters.streams_expired += 1
+        self.streams[name] = state
+        return state
 
     def _add_state(self) -> None:
         """A state was created: every per-state table grows by one (§8)."""
@@ -650,6 +663,7 @@ class Shield:
                 "episodes": self.counters.episodes,
                 "model_version": self.counters.model_version,
                 "interventions": dict(self.counters.interventions),
+                "streams_expired": self.counters.streams_expired,
             },
             "rng": copy.deepcopy(self._rng.bit_generator.state),
             "clustering": self.clusterer.snapshot(),
@@ -700,6 +714,8 @@ class Shield:
             interventions={c.name: stored.integer(counters["interventions"][c.name],
                                                   f"counters.interventions.{c.name}")
                            for c in cfg.criteria},
+            streams_expired=stored.integer(counters.get("streams_expired", 0),
+                                           "counters.streams_expired"),
         )
         self._rng.bit_generator.state = data["rng"]
         limit = cfg.limits.max_states
@@ -718,8 +734,12 @@ class Shield:
         if self.transitions.n_states != n or self.flags.flags.shape[0] != n:
             raise InvalidSnapshot("states, matrices and flags disagree on the state count")
         self._restore_risk(data, n)
+        streams = data["streams"]
+        if len(streams) > cfg.limits.max_streams:
+            raise InvalidSnapshot(f"more than {cfg.limits.max_streams} streams",
+                                  field="streams")
         self.streams = {str(name): self._restore_stream(f"streams.{name}", s, n)
-                        for name, s in data["streams"].items()}
+                        for name, s in streams.items()}
         return self
 
     def _restore_stream(self, field: str, data: dict[str, Any], n: int) -> StreamState:

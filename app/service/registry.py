@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from app.core import Decision, Shield, ShieldConfig, ShieldError
+from app.core import Decision, InvalidConfig, Shield, ShieldConfig, ShieldError
 from app.core.shield import StepInput
 from app.service import codec
 from app.service.storage import Fsync, ModelStore
@@ -45,6 +45,12 @@ class ModelQuarantined(ShieldError):
     """The model's files were damaged at start-up: it is set aside, the others serve."""
 
     code = "model_quarantined"
+
+
+class TooManyModels(ShieldError):
+    """The server holds as many models as it may."""
+
+    code = "too_many_models"
 
 
 class DamagedModel(Exception):
@@ -101,8 +107,11 @@ class ModelRegistry:
 
     def __init__(self, data_dir: Path | None = None, fsync: Fsync = "interval",
                  snapshot_every: int = 50_000,
-                 default_config: ShieldConfig | None = None) -> None:
+                 default_config: ShieldConfig | None = None, *, max_models: int = 1000,
+                 max_states: int = 100_000) -> None:
         self.data_dir = data_dir
+        self.max_models = max_models
+        self.max_states = max_states
         self.fsync = fsync
         self.snapshot_every = snapshot_every
         self.default_config = default_config or ShieldConfig()
@@ -218,9 +227,11 @@ class ModelRegistry:
         """A new, empty model (its configuration is stored at once)."""
         check_name(name)
         self._refuse_quarantined(name)
+        self._check_limits(config)
         with self._lock:
             if name in self._models:
                 raise ModelExists(f"a model named {name!r} exists", field="name")
+            self._check_room(name)
             model = Model(name, Shield(config), self._store(name))
             if model.store is not None:
                 model.store.create(config.to_dict())
@@ -232,7 +243,9 @@ class ModelRegistry:
         check_name(name)
         self._refuse_quarantined(name)
         shield = Shield.from_snapshot(snapshot)
+        self._check_limits(shield.config)
         with self._lock:
+            self._check_room(name)
             old = self._models.get(name)
             if old is not None:
                 with old.lock:
@@ -244,6 +257,16 @@ class ModelRegistry:
                 self._snapshot(model)
             self._models[name] = model
             return model
+
+    def _check_limits(self, config: ShieldConfig) -> None:
+        if config.limits.max_states > self.max_states:
+            raise InvalidConfig(f"this server allows at most {self.max_states} states a model",
+                                field="limits.max_states")
+
+    def _check_room(self, name: str) -> None:
+        if name not in self._models and len(self._models) >= self.max_models:
+            raise TooManyModels(f"this server holds at most {self.max_models} models",
+                                field="name")
 
     def delete(self, name: str) -> None:
         """Remove a model and its files."""
