@@ -35,9 +35,11 @@ valid = st.fixed_dictionaries(
     optional={"stream": st.sampled_from(["0", "car-1"]), "event": st.sampled_from(
         ["collision", "large_distance"]), "done": st.just(True), "learn": st.booleans(),
         "shadow": st.booleans(), "applied_action": st.floats(-3, 3)})
-WRONG = {  # well-typed values that only the model can refuse
-    "observation": st.lists(st.floats(-50, 250), min_size=1, max_size=5),
-    "action": st.none(),
+EXTREME = st.sampled_from([1e300, -1e300, 5e-324, -5e-324, 1.7976931348623157e308])
+WRONG = {  # well-typed values that only the model can refuse (or must survive)
+    "observation": st.lists(st.one_of(st.floats(-50, 250), EXTREME), min_size=1, max_size=5),
+    "action": st.one_of(st.none(), EXTREME),
+    "applied_action": EXTREME,
     "event": st.sampled_from(["meteor", ""]),
 }
 
