@@ -16,7 +16,6 @@ import json
 import platform
 import sys
 import time
-from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -24,38 +23,18 @@ import gymnasium as gym
 import numpy as np
 import torch
 from stable_baselines3 import TD3
-from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.noise import NormalActionNoise
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.core import ReviserConfig, ShieldConfig
 from client.shield import ShieldWrapper  # noqa: E402
-from client.shield.sb3 import AppliedActionReplayBuffer  # noqa: E402
+from client.shield.sb3 import AppliedActionReplayBuffer, Failures  # noqa: E402
 
 # The car-following shield, its warm-up counted in steps (the learner's first 1000 are random
 # actions, then its episodes are few and long): it learns from the first step, revises after.
 STEPS_WARMUP = ShieldConfig(reviser=ReviserConfig(activate_after_episodes=0))
 WARMUP_STEPS = 5000
-
-
-class Failures(BaseCallback):
-    """Counts the events of every step and the episodes."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.failures: Counter[str] = Counter()
-        self.episodes = 0
-        self.revised = 0
-
-    def _on_step(self) -> bool:
-        for info, done in zip(self.locals["infos"], self.locals["dones"], strict=True):
-            if info.get("event"):
-                self.failures[info["event"]] += 1
-            self.episodes += bool(done)
-            shield = info.get("shield")
-            self.revised += bool(shield and shield["revised"])
-        return True
 
 
 def train(seed: int, steps: int, shielded: bool) -> dict[str, Any]:

@@ -16,31 +16,16 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from stable_baselines3 import TD3
-from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.noise import NormalActionNoise
 
 from app.core import ReviserConfig, ShieldConfig
 from client.shield import ShieldWrapper
-from client.shield.sb3 import AppliedActionReplayBuffer
+from client.shield.sb3 import AppliedActionReplayBuffer, Failures
 
 # The car-following shield, its warm-up counted in steps (the learner's first 1000 are random
 # actions, then its episodes are few and long): it learns from the first step, revises after.
 STEPS_WARMUP = ShieldConfig(reviser=ReviserConfig(activate_after_episodes=0))
 WARMUP_STEPS = 5000
-
-
-class Failures(BaseCallback):
-    """Counts the failures the environment reports in ``info["event"]``."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.failures: Counter[str] = Counter()
-
-    def _on_step(self) -> bool:
-        for info in self.locals["infos"]:
-            if info.get("event"):
-                self.failures[info["event"]] += 1
-        return True
 
 
 def train(steps: int, seed: int, shielded: bool) -> Counter[str]:

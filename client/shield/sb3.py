@@ -7,16 +7,20 @@ This buffer stores ``info["applied_action"]`` instead::
 
     model = TD3("MlpPolicy", ShieldWrapper(env), replay_buffer_class=AppliedActionReplayBuffer)
 
+:class:`Failures` is a callback that counts what the shield saw during training.
+
 Needs ``stable-baselines3`` (``pip install .[sb3]``).
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.callbacks import BaseCallback
 
 
 class AppliedActionReplayBuffer(ReplayBuffer):
@@ -33,3 +37,24 @@ class AppliedActionReplayBuffer(ReplayBuffer):
                 scaled = 2.0 * (np.asarray(applied).reshape(-1) - low) / (high - low) - 1.0
                 action[i] = scaled.reshape(-1)
         super().add(obs, next_obs, action, reward, done, infos)
+
+
+class Failures(BaseCallback):
+    """Counts, over a training, the failures the environment reports in ``info[key]``, the
+    episodes and the steps the shield revised."""
+
+    def __init__(self, key: str = "event") -> None:
+        super().__init__()
+        self.key = key
+        self.failures: Counter[str] = Counter()
+        self.episodes = 0
+        self.revised = 0
+
+    def _on_step(self) -> bool:
+        for info, done in zip(self.locals["infos"], self.locals["dones"], strict=True):
+            if info.get(self.key):
+                self.failures[info[self.key]] += 1
+            self.episodes += bool(done)
+            shield = info.get("shield")
+            self.revised += bool(shield and shield["revised"])
+        return True
