@@ -139,6 +139,21 @@ def test_vectorised_copies_write_streams_of_their_own() -> None:
     venv.close()
 
 
+def test_gymnasium_vector_envs_take_the_wrapper_per_copy() -> None:
+    import functools
+
+    shared = LocalShield(config_for(Ledge(), EDGE))
+    gym.register("LedgeForTest-v0", entry_point=Ledge)
+    venv = gym.make_vec("LedgeForTest-v0", num_envs=3, vectorization_mode="sync",
+                        wrappers=[functools.partial(ShieldWrapper, shield=shared)])
+    venv.reset(seed=0)
+    for _ in range(4):
+        _, _, _, _, info = venv.step(np.zeros((3, 1), np.float32))
+    assert len(shared.shield.streams) == 3 and shared.shield.counters.steps == 12
+    assert list(info["shield"]["stream"]) == list(shared.shield.streams)  # info per copy
+    venv.close()
+
+
 def test_a_failure_that_does_not_end_the_episode_is_learned() -> None:
     env = ShieldWrapper(Ledge(bumps=True),
                         config=ledge_config({"edge": "decrease", "bump": "decrease"}))
