@@ -71,6 +71,7 @@ class Model:
     shield: Shield
     store: ModelStore | None
     lock: threading.Lock = field(default_factory=threading.Lock)
+    snapshotting: threading.Lock = field(default_factory=threading.Lock)  # one write at a time
     since_snapshot: int = 0
     watchers: list[Watcher] = field(default_factory=list)
 
@@ -160,7 +161,7 @@ class ModelRegistry:
         if self._syncer is not None:
             self._syncer.join()
         for model in list(self._models.values()):
-            with model.lock:
+            with model.lock, model.snapshotting:
                 if model.store is not None:
                     if model.since_snapshot:
                         self._snapshot(model)
@@ -248,7 +249,7 @@ class ModelRegistry:
             self._check_room(name)
             old = self._models.get(name)
             if old is not None:
-                with old.lock:
+                with old.lock, old.snapshotting:
                     if old.store is not None:
                         old.store.close()
             model = Model(name, shield, self._store(name))
@@ -272,7 +273,7 @@ class ModelRegistry:
         """Remove a model and its files."""
         with self._lock:
             model = self.get(name)
-            with model.lock:
+            with model.lock, model.snapshotting:
                 del self._models[name]
                 if model.store is not None:
                     model.store.remove()
@@ -280,7 +281,7 @@ class ModelRegistry:
     def reset(self, name: str) -> Model:
         """Empty a model: no states, counters at zero, its seed's generator."""
         model = self.get(name)
-        with model.lock:
+        with model.lock, model.snapshotting:
             model.shield.reset()
             if model.store is not None:
                 self._snapshot(model)
@@ -292,9 +293,18 @@ class ModelRegistry:
         return ModelStore(self.data_dir / "models" / name, self.fsync)
 
     def _snapshot(self, model: Model) -> None:
+        """Snapshot now (the caller holds the model's locks)."""
+        model.store.write_snapshot(codec.to_npz(self._take(model)))  # type: ignore[union-attr]
+
+    @staticmethod
+    def _take(model: Model) -> dict[str, Any]:
+        """The model's state and a rotated journal: what a snapshot write then stores, with
+        the model's lock released or not."""
         assert model.store is not None
-        model.store.write_snapshot(codec.to_npz(model.shield.snapshot()))
+        data = model.shield.snapshot()
+        model.store.rotate()
         model.since_snapshot = 0
+        return data
 
     # --- steps ----------------------------------------------------------------------------
 
@@ -327,26 +337,36 @@ class ModelRegistry:
         With ``blocking=False`` nothing is done (None) if a model's lock is taken.
         """
         models = {name: self.get(name) for name in dict.fromkeys(n for n, _ in steps)}
-        with ExitStack() as stack:
-            for name in sorted(models):  # a fixed order: no deadlock between batches
-                lock = models[name].lock
-                if not lock.acquire(blocking=blocking):
-                    return None
-                stack.callback(lock.release)
-                if self._models.get(name) is not models[name]:  # replaced or deleted meanwhile
-                    raise UnknownModel(f"model {name!r} was replaced or deleted; send again",
-                                       field="name")
-            inputs = [_validate(models[name].shield, step, i, len(steps) > 1)
-                      for i, (name, step) in enumerate(steps)]
-            self._journal(models, steps)
-            decisions = [models[name].shield.apply(inp)
-                         for (name, _), inp in zip(steps, inputs, strict=True)]
-            for (name, step), decision in zip(steps, decisions, strict=True):
-                if models[name].watchers:  # nobody watching: this check is all it costs
-                    self._publish(models[name], step, decision)
-            for model in models.values():
-                if model.store is not None and model.since_snapshot >= self.snapshot_every:
-                    self._snapshot(model)
+        due: list[Model] = []  # models whose snapshot this call takes, their write lock held
+        try:
+            with ExitStack() as stack:
+                for name in sorted(models):  # a fixed order: no deadlock between batches
+                    lock = models[name].lock
+                    if not lock.acquire(blocking=blocking):
+                        return None
+                    stack.callback(lock.release)
+                    if self._models.get(name) is not models[name]:  # replaced or deleted
+                        raise UnknownModel(f"model {name!r} was replaced or deleted; send "
+                                           "again", field="name")
+                inputs = [_validate(models[name].shield, step, i, len(steps) > 1)
+                          for i, (name, step) in enumerate(steps)]
+                self._journal(models, steps)
+                decisions = [models[name].shield.apply(inp)
+                             for (name, _), inp in zip(steps, inputs, strict=True)]
+                for (name, step), decision in zip(steps, decisions, strict=True):
+                    if models[name].watchers:  # nobody watching: this check is all it costs
+                        self._publish(models[name], step, decision)
+                taken = []
+                for model in models.values():
+                    if (model.store is not None and model.since_snapshot >= self.snapshot_every
+                            and model.snapshotting.acquire(blocking=False)):  # else: next step
+                        due.append(model)
+                        taken.append(self._take(model))
+            for model, data in zip(due, taken, strict=True):  # with the models' locks released
+                model.store.write_snapshot(codec.to_npz(data))  # type: ignore[union-attr]
+        finally:
+            for model in due:
+                model.snapshotting.release()
         return decisions
 
     def watch(self, name: str, watcher: Watcher) -> Callable[[], None]:

@@ -2,10 +2,13 @@
 
 ``DATA/models/<name>/`` holds ``config.json``, ``snapshot.npz`` and ``journal.log``. Every
 accepted learning request is appended to the journal *before* the model applies it (write-ahead),
-one line per request: ``<crc32 hex> <json>``. Snapshots are written atomically (temporary file,
-fsync, rename, fsync of the directory). Because learning is deterministic, the snapshot plus the
-journal records after it rebuild the model exactly. A torn last line (a crash mid-write) fails
-its checksum and is dropped with a log line.
+one line per request: ``<crc32 hex> <json>``. A snapshot is taken in two moves: the journal is
+rotated to ``journal.1.log`` when the model's state is copied (under the model's lock), and the
+snapshot is written (temporary file, fsync, rename) and ``journal.1.log`` removed afterwards,
+while the model goes on learning into a new journal. Because learning is deterministic, the
+snapshot plus the records of both journals after its version rebuild the model exactly, at
+every moment in between. A torn last line (a crash mid-write) fails its checksum and is dropped
+with a log line.
 """
 
 from __future__ import annotations
@@ -67,6 +70,11 @@ class ModelStore:
     def journal_path(self) -> Path:
         return self.directory / "journal.log"
 
+    @property
+    def rotated_path(self) -> Path:
+        """The records a snapshot being written will cover."""
+        return self.directory / "journal.1.log"
+
     def create(self, config: dict[str, Any]) -> None:
         """Start the files of a new model."""
         self.directory.mkdir(parents=True, exist_ok=True)
@@ -94,16 +102,33 @@ class ModelStore:
                 os.fsync(self._journal.fileno())
                 self._dirty = False
 
-    def write_snapshot(self, blob: bytes) -> None:
-        """Store a snapshot, then empty the journal it covers."""
-        write_atomic(self.snapshot_path, blob)
+    def rotate(self) -> None:
+        """Start a new, empty journal; the records so far join ``journal.1.log`` until
+        :meth:`write_snapshot` stores the snapshot that covers them."""
         with self._lock:
             if self._journal is not None:
+                self._journal.flush()
+                os.fsync(self._journal.fileno())
                 self._journal.close()
                 self._journal = None
+                self._dirty = False
+            if self.journal_path.exists():
+                if self.rotated_path.exists():  # a snapshot that was never written
+                    with open(self.rotated_path, "ab") as f:
+                        f.write(self.journal_path.read_bytes())
+                        f.flush()
+                        os.fsync(f.fileno())
+                else:
+                    os.replace(self.journal_path, self.rotated_path)
             with open(self.journal_path, "wb") as f:
                 os.fsync(f.fileno())
-            self._dirty = False
+            sync_directory(self.directory)
+
+    def write_snapshot(self, blob: bytes) -> None:
+        """Store a snapshot that covers every record rotated before it."""
+        write_atomic(self.snapshot_path, blob)
+        self.rotated_path.unlink(missing_ok=True)
+        sync_directory(self.directory)
 
     def read_snapshot(self) -> bytes | None:
         """The last snapshot, if one was taken."""
@@ -114,21 +139,11 @@ class ModelStore:
         return result
 
     def records(self) -> Iterator[dict[str, Any]]:
-        """Journal records in order; a damaged line ends the replay with a log line."""
-        if not self.journal_path.exists():
-            return
-        lines = self.journal_path.read_bytes().split(b"\n")
-        complete, tail = lines[:-1], lines[-1]
-        for number, line in enumerate(complete, start=1):
-            record = _parse(line)
-            if record is None:
-                log.error("%s: journal line %d is damaged; dropping it and what follows",
-                          self.journal_path, number)
-                return
-            yield record
-        if tail:
-            log.warning("%s: dropped a torn last journal record (%d bytes)",
-                        self.journal_path, len(tail))
+        """Journal records in order, the rotated ones first; a damaged line ends its file's
+        replay with a log line (what follows it can then not continue the model)."""
+        for path in (self.rotated_path, self.journal_path):
+            if path.exists():
+                yield from _records(path)
 
     def close(self) -> None:
         """Flush and close the journal."""
@@ -142,6 +157,20 @@ class ModelStore:
         """Delete every file of the model."""
         self.close()
         shutil.rmtree(self.directory, ignore_errors=True)
+
+
+def _records(path: Path) -> Iterator[dict[str, Any]]:
+    lines = path.read_bytes().split(b"\n")
+    complete, tail = lines[:-1], lines[-1]
+    for number, line in enumerate(complete, start=1):
+        record = _parse(line)
+        if record is None:
+            log.error("%s: journal line %d is damaged; dropping it and what follows", path,
+                      number)
+            return
+        yield record
+    if tail:
+        log.warning("%s: dropped a torn last journal record (%d bytes)", path, len(tail))
 
 
 def _parse(line: bytes) -> dict[str, Any] | None:
