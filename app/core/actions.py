@@ -1,4 +1,4 @@
-"""Continuous-to-discrete action encoding (spec §6).
+"""Continuous-to-discrete action encoding (docs/algorithm.md).
 
 Bins are 0-based here: bin 0 is the hardest braking interval [low, low + delta), bin q - 1 the
 strongest acceleration (closed on the right). The paper numbers them 1..q.

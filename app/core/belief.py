@@ -1,4 +1,4 @@
-"""Recognition, Eq. 1: the belief Prob(S_t) over states (spec §4).
+"""Recognition, Eq. 1: the belief Prob(S_t) over states (docs/algorithm.md).
 
 ``eta_i = exp(-||z - s_i||^2 / var_i)`` and ``lambda_i = eta_i / sum_j eta_j``, computed as a
 softmax of the logits so that an observation far from every state still gets a distribution

@@ -1,4 +1,4 @@
-"""Online state determination: evolving clustering with recursive potentials (spec §2-3).
+"""Online state determination: evolving clustering with recursive potentials (docs/algorithm.md).
 
 Each cluster centre is a state of the e-FSM. States are only ever added or moved, never removed
 or renumbered, so the transition matrices and flags can index them for the model's whole life.
@@ -43,7 +43,7 @@ class StateUpdate:
 
 
 class EvolvingClusterer:
-    """eTS / eTS+ evolving clustering of normalised observations (spec §2.2-2.4).
+    """eTS / eTS+ evolving clustering of normalised observations (docs/algorithm.md).
 
     The potential of a point is its inverse mean squared distance to all earlier samples,
     ``P_k(z) = 1 / (1 + mean_l ||z - z_l||^2)``, kept recursively in O(d) memory.
@@ -94,14 +94,14 @@ class EvolvingClusterer:
         return self._support[: self._n].copy()
 
     def variances(self) -> FloatArray:
-        """var(s^i) of Eq. 1 per state (spec §3, switch A9), read-only view."""
+        """var(s^i) of Eq. 1 per state (docs/algorithm.md), read-only view."""
         view = self._variances[: self._n]
         view.flags.writeable = False
         return view
 
     def _refresh_variance(self, i: int) -> None:
         cfg = self.config
-        if cfg.spread == "radius":  # [REC] r_i^2 with a floor
+        if cfg.spread == "radius":  # r_i^2 with a floor
             var = self._radii[i] ** 2
         elif cfg.spread == "member_variance":  # mean squared member distance, floored
             var = self._scatter[i] / self._support[i]
@@ -131,17 +131,17 @@ class EvolvingClusterer:
         self.k += 1
         k = self.k
         theta = float(z @ z)
-        if self._n == 0:  # first sample: centre 1 with potential 1 (§2.2.3)
+        if self._n == 0:  # first sample: centre 1 with potential 1
             index = self._add(z, potential=1.0)
             self._accumulate(z, theta)
             return StateUpdate("new", index, np.zeros(1))
 
         n = self._n
         d2 = self.sq_distances(z, theta)
-        # §2.2.1: P_k(z_k) = (k-1) / ((k-1)(theta+1) + sigma - 2 nu)
+        # P_k(z_k) = (k-1) / ((k-1)(theta+1) + sigma - 2 nu)
         nu = float(z @ self.beta)
         p_new = (k - 1) / ((k - 1) * (theta + 1.0) + self.sigma - 2.0 * nu)
-        # §2.2.2: P_k(c_i) = (k-1) P_{k-1}(c_i) / (k-2 + P_{k-1}(c_i) (1 + d_i^2))
+        # P_k(c_i) = (k-1) P_{k-1}(c_i) / (k-2 + P_{k-1}(c_i) (1 + d_i^2))
         pot = self._potentials[:n]
         pot[:] = (k - 1) * pot / (k - 2 + pot * (1.0 + d2))
         nearest = int(d2.argmin())
@@ -198,7 +198,7 @@ class EvolvingClusterer:
         self._centres[n] = z
         self._sq_norms[n] = float(z @ z)
         self._potentials[n] = potential
-        self._radii[n] = self.config.epsilon  # initial spread = epsilon (§2.3)
+        self._radii[n] = self.config.epsilon  # initial spread = epsilon
         self._support[n] = 1
         self._scatter[n] = 0.0
         self._n = n + 1
@@ -206,7 +206,7 @@ class EvolvingClusterer:
         return n
 
     def _assign(self, index: int, sq_distance: float) -> None:
-        # §2.4: scatter_i += ||z - c_i||^2; r_i = rho r_i + (1 - rho) sqrt(scatter_i / N_i)
+        # scatter_i += ||z - c_i||^2; r_i = rho r_i + (1 - rho) sqrt(scatter_i / N_i)
         rho = self.config.rho
         support = int(self._support[index]) + 1
         scatter = float(self._scatter[index]) + sq_distance

@@ -1,8 +1,8 @@
 """Configuration of one e-FSM model: frozen dataclasses with the paper's car-following values.
 
-Every ambiguity of the paper (spec/efsm.md §16, A1-A16) is a named switch whose default is the
-spec's recommendation [REC]; :meth:`ShieldConfig.paper_literal` sets all of them to the literal
-reading. Values are checked on construction and errors name the dotted field at fault.
+Every gap of the paper is a named switch (docs/algorithm.md lists them with the choice made);
+:meth:`ShieldConfig.paper_literal` sets all of them to the literal reading. Values are checked
+on construction and errors name the dotted field at fault.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ class ObservationSpec:
     """The e-FSM observation z_t (Eq. 12) and the bounds that normalise it.
 
     z is scaled to ``(z - low) / (high - low)`` before clustering, so that no dimension
-    dominates the distances. The spec's [REC] divides by (32, 200, 32) (§2.4); the default
+    dominates the distances. A first reading divided by (32, 200, 32); the default
     divides the headway by 50 m instead: with 200 m a state spanned tens of metres of headway
     and the reviser could not tell the seconds before a crash from ordinary following
     (results/README.md, "The headway scale"; tuned on seeds 0-2). Headways above 50 m simply
@@ -113,7 +113,7 @@ class ObservationSpec:
 
 @dataclass(frozen=True)
 class ActionSpec:
-    """The continuous action range A_c and its discretisation into q bins of width delta (§6)."""
+    """The continuous action range A_c and its discretisation into q bins of width delta."""
 
     low: float = -2.0  # [m/s²]
     high: float = 2.0  # [m/s²]
@@ -162,11 +162,11 @@ PAPER_CRITERIA = (
 
 @dataclass(frozen=True)
 class ClusteringConfig:
-    """Online evolving clustering (spec §2-3).
+    """Online evolving clustering (docs/algorithm.md).
 
-    ``rho`` (0.7) and ``epsilon`` are the paper's eTS coefficients. [REC] rho is the radius
+    ``rho`` (0.7) and ``epsilon`` are the paper's eTS coefficients. rho is the radius
     learning constant, epsilon the zone-of-influence radius in normalised units and the initial
-    spread of a new state (§2.3). The default halves the paper's epsilon of 0.3: at 0.3 the
+    spread of a new state. The default halves the paper's epsilon of 0.3: at 0.3 the
     model kept 5-12 states, a few runs were caught braking in a coarse state flagged for
     collision, and 0.15 (12-17 states) succeeded more on three tuning seeds when both ran on
     one machine; on a fourth tuning seed (four runs each) and on the evaluation seeds the two
@@ -192,10 +192,10 @@ class ClusteringConfig:
 
 @dataclass(frozen=True)
 class TransitionConfig:
-    """Online transition identification, Eqs. 3-4 (spec §7-8)."""
+    """Online transition identification, Eqs. 3-4 (docs/algorithm.md)."""
 
-    learning_rate: float = 0.01  # phi [REC]
-    prior: float = 1e-3  # F(0) = F_o(0) = epsilon-bar [REC], must be > 0
+    learning_rate: float = 0.01  # phi
+    prior: float = 1e-3  # F(0) = F_o(0) = epsilon-bar, must be > 0
     on_new_state: Literal["skip", "pad"] = "skip"  # A3
     expansion: Literal["prior", "zero_uniform", "zero_identity"] = "prior"  # A10
     action_source: Literal["executed", "proposed"] = "executed"  # A8
@@ -229,7 +229,7 @@ class ReviserConfig:
     inspect: Literal["any", "first_index"] = "any"  # A5
     search: Literal["fixed", "literal"] = "fixed"  # A6
     multi_step: Literal["iterate", "single"] = "iterate"  # A11
-    # A4: "rate" (count-based, the spec's option c) replaces the [REC] "sticky" default: with
+    # "rate" (count-based) replaces "sticky" flags (unfavourable flags never cleared): with
     # sticky flags nearly every state ended up flagged and the reviser braked everywhere
     # (results/README.md, tuned on seeds 0-1)
     flags: Literal["sticky", "overwrite", "rate"] = "rate"

@@ -1,4 +1,4 @@
-"""Unfavourable-state flags L(s(i)), visit, entry and failure counts (spec §5).
+"""Unfavourable-state flags L(s(i)), visit, entry and failure counts (docs/algorithm.md).
 
 A flag is 0 (l_n, favourable) or ``1 + c`` for criterion ``c`` of the configuration, whose
 order is the priority (the paper: collision l_s before large distance l_ld).
@@ -104,7 +104,7 @@ class StateFlags:
         """Count a recognition of ``state`` (an entry too, if ``entered``; and its failure, if
         any) and flag it (A4).
 
-        ``sticky`` [REC]: an unfavourable flag is only replaced by one of higher priority.
+        ``sticky``: an unfavourable flag is only replaced by one of higher priority.
         ``overwrite``: the literal re-flagging of the recognised state on every step.
         ``rate`` (A4 c, count-based): the state carries the highest-priority criterion whose
         failures make up at least ``min_rate`` of its recognitions (or of its entries, by

@@ -1,7 +1,7 @@
 """The TPMs of Eqs. 3-4 in a lazy form whose memory and per-step cost do not grow as n^2.
 
 Write ``D_a = (1 - phi)^u_a`` for the decay after ``u_a`` updates of action ``a``. Unrolling
-Eqs. 3-4 with epsilon-bar padding (§8) gives, for every entry of ``F^a``:
+Eqs. 3-4 with epsilon-bar padding gives, for every entry of ``F^a``:
 
     F^a(i, j) = D_a * (eps * g_a(max(i, j)) + S_a(i, j)),   g_a(m) = 1 / D_a(when m appeared)
 
@@ -11,8 +11,9 @@ to their top-k states. Rows are normalised on demand: ``P^a(i, .) = F^a(i, .) / 
 
 Scales live in the log domain (``lg_a(m) = log g_a(m)``, ``ld_a = log D_a``) and each learned row
 keeps its own offset, so nothing overflows or underflows to 0/0 over millions of steps: the
-stable form of spec §7 without its dense rows. Only the rows a belief touches are read or
-written; a prediction costs O(k W + n) for k belief states and W stored entries per row.
+stable form of Eqs. 3-4 (docs/algorithm.md) without its dense rows. Only the rows a belief
+touches are read or written; a prediction costs O(k W + n) for k belief states and W stored
+entries per row.
 """
 
 from __future__ import annotations
@@ -69,7 +70,7 @@ class LazyTransitions:
         return self._n
 
     def add_state(self) -> None:
-        """Expand every matrix by one state (§8): the new pads are ``eps`` at today's scale."""
+        """Expand every matrix by one state: the new pads are ``eps`` at today's scale."""
         n, limit = self._n, self.max_states
         self._created = ensure_capacity(self._created, n + 1, limit, axis=1)
         self._pad = ensure_capacity(self._pad, n + 1, limit, axis=1)
@@ -185,7 +186,7 @@ class LazyTransitions:
         return slot
 
     def predict(self, belief: Belief, action_bin: int, transpose: bool) -> FloatArray:
-        """Eq. 5: ``P^T p`` when ``transpose`` ([REC], A1), else the literal ``P p``."""
+        """Eq. 5: ``P^T p`` when ``transpose`` (A1), else the literal ``P p``."""
         if transpose:
             return self._predict_transposed(belief, action_bin)
         return self._predict_literal(belief, action_bin)

@@ -1,5 +1,5 @@
 """The action reviser: Alg. 1 (variant threshold), Alg. 3 (inspect), Alg. 2 (search), the
-k-step prediction of Eqs. 5-7 and the revision noise (spec §9-13).
+k-step prediction of Eqs. 5-7 and the revision noise (docs/algorithm.md).
 
 Verdicts are integers: ``OK`` (-1) or the index of the criterion an action is predicted to
 meet, which is also its priority (0 = highest).
@@ -55,7 +55,7 @@ def inspect(
 ) -> int:
     """Alg. 3: the criterion an action is predicted to meet, or ``OK``.
 
-    ``flagged`` holds the flagged states (ascending) and their flags. ``any`` [REC]: the
+    ``flagged`` holds the flagged states (ascending) and their flags. ``any``: the
     highest-priority flag among all states at or above the threshold. ``first_index``: the
     literal loop, which answers with the first such state by index.
     """
@@ -84,7 +84,7 @@ def predict_ahead(
 ) -> FloatArray:
     """Eqs. 5-7: one step under the action, then ``horizon - 1`` steps of the marginal TPM.
 
-    ``P* = (1/q) sum_r P^r`` (Eq. 7, uniform action prior). ``iterate`` [REC] applies it
+    ``P* = (1/q) sum_r P^r`` (Eq. 7, uniform action prior). ``iterate`` applies it
     ``horizon - 1`` times (A11); ``single`` applies it once, as Eq. 6 is written. Each
     propagated distribution is truncated to its top-k states like a belief.
     """
@@ -106,7 +106,7 @@ def search(
     """Alg. 2: step through the bins away from the predicted criterion until it clears.
 
     A ``decrease`` criterion (collision) searches slower actions, an ``increase`` one (large
-    distance) faster ones. The fixed form [REC] (A6) stops at the last bin instead of the
+    distance) faster ones. The fixed form (A6) stops at the last bin instead of the
     literal ``r > 0`` off-by-one, and steps back when the search runs into a criterion of
     higher priority (an upward search that meets a collision). Returns the chosen bin and the
     ``(bin, verdict)`` of every candidate tried.
@@ -129,6 +129,7 @@ def search(
 
 
 def noise_std(config: ReviserConfig, a_max: float, episode: int) -> float:
-    """Std of N(0, V) with ``V = a_max / max(1, K * episode)`` (§13, A7: variance or std)."""
+    """Std of N(0, V) with ``V = a_max / max(1, K * episode)``, V a variance or a std
+    (``noise``; docs/algorithm.md)."""
     v = a_max / max(1.0, config.noise_k * episode)
     return math.sqrt(v) if config.noise == "variance" else v

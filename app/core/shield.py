@@ -347,7 +347,7 @@ class Shield:
             return self._what_if(step)
         cfg = self.config
         z = self.normalise(step.observation)
-        # §2.4 clustering: a new state expands every TPM (§8)
+        # clustering: a new state expands every TPM
         update = self.clusterer.learn_one(z, failure=step.event is not None)
         if update.is_new:
             self._add_state()
@@ -361,7 +361,7 @@ class Shield:
         # Eqs. 3-4 for the stream's previous step, under the action behind the transition
         state = self._stream(step.stream)
         self._learn_transition(state, belief, update.is_new, step.applied_action)
-        # §5 flags on the recognised state
+        # flags on the recognised state
         recognised = belief.argmax()
         self._learn_outcome(state, recognised, step)
         entered = state.belief is None or state.belief.argmax() != recognised
@@ -406,7 +406,7 @@ class Shield:
         return state
 
     def _add_state(self) -> None:
-        """A state was created: every per-state table grows by one (§8)."""
+        """A state was created: every per-state table grows by one."""
         self.transitions.add_state()
         self.flags.add_state()
         self.outcomes.add_state()
@@ -455,7 +455,7 @@ class Shield:
             return  # A3 (a): tau and gamma have different sizes
         if applied is not None:
             action_bin = actions.encode(applied, self.config.action)
-        elif cfg.action_source == "executed":  # A8 [REC]
+        elif cfg.action_source == "executed":  # A8
             action_bin = state.applied_bin
         else:  # A8 literal: the controller's proposal
             action_bin = state.proposed_bin
@@ -507,7 +507,7 @@ class Shield:
         index: int,
         rng: np.random.Generator,
     ) -> Decision:
-        """Algs. 1-3 on the proposed action, and the revision with its noise (§12-13)."""
+        """Algs. 1-3 on the proposed action, and the revision with its noise."""
         cfg = self.config
         proposed = step.action
         assert proposed is not None

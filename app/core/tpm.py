@@ -1,4 +1,4 @@
-"""Online transition identification, Eqs. 3-4 (spec §7-9): pure functions and a dense model.
+"""Online transition identification, Eqs. 3-4 (docs/algorithm.md): pure functions and a dense model.
 
 One transition-probability matrix (TPM) ``P^a`` per discrete action, row-stochastic:
 ``P^a(i, j) = Prob(s_{t+1} = j | s_t = i, a_t = a)`` (Eq. 2). The pure functions are the maths
@@ -6,7 +6,7 @@ in its two exact forms:
 
 * literal counts (Eqs. 3-4): ``F <- F + phi (tau gamma^T - F)``, ``F_o <- F_o + phi (tau - F_o)``,
   ``P = diag(F_o)^-1 F``; this form underflows after long runs;
-* the stable form [REC]: keep ``P`` and ``F_o`` and update only the rows that ``tau`` touches.
+* the stable form: keep ``P`` and ``F_o`` and update only the rows that ``tau`` touches.
 
 :class:`DenseTransitions` stores every matrix densely in the stable form: the straightforward
 implementation, exact and simple, used as the oracle in tests and the baseline in ``bench/``.
@@ -40,7 +40,7 @@ class TransitionModel(Protocol):
         ...
 
     def add_state(self) -> None:
-        """Expand every matrix by one row and one column (spec §8)."""
+        """Expand every matrix by one row and one column (docs/algorithm.md)."""
         ...
 
     def learn_one(self, prev: Belief, action_bin: int, belief: Belief) -> None:
@@ -48,7 +48,7 @@ class TransitionModel(Protocol):
         ...
 
     def predict(self, belief: Belief, action_bin: int, transpose: bool) -> FloatArray:
-        """Eq. 5: ``P^T belief`` (transpose, [REC]) or the literal ``P belief`` (A1)."""
+        """Eq. 5: ``P^T belief`` (transpose,) or the literal ``P belief`` (A1)."""
         ...
 
     def predict_marginal(self, belief: Belief, transpose: bool) -> FloatArray:
@@ -92,7 +92,7 @@ def update_counts(
 def grow_counts(
     F: FloatArray, F_o: FloatArray, prior: float
 ) -> tuple[FloatArray, FloatArray]:
-    """Expansion with epsilon-bar padding (§8): a new row and column of epsilon-bar."""
+    """Expansion with epsilon-bar padding: a new row and column of epsilon-bar."""
     n = F.shape[0]
     F_new = np.full((n + 1, n + 1), prior)
     F_new[:n, :n] = F
@@ -104,14 +104,14 @@ def probabilities(F: FloatArray, F_o: FloatArray) -> FloatArray:
     return F / F_o[:, None]
 
 
-# --- Stable form [REC] ---------------------------------------------------------------------
+# --- Stable form ---------------------------------------------------------------------
 
 
 def update_stable(
     P: FloatArray, F_o: FloatArray, tau: FloatArray, gamma: FloatArray, lr: float
 ) -> tuple[FloatArray, FloatArray]:
     """Eqs. 3-4 on (P, F_o): ``w_i = phi tau_i / ((1-phi) F_o,i + phi tau_i)``,
-    ``P_i += w_i (gamma - P_i)``, ``F_o,i = (1-phi) F_o,i + phi tau_i`` (§7)."""
+    ``P_i += w_i (gamma - P_i)``, ``F_o,i = (1-phi) F_o,i + phi tau_i``."""
     decayed = (1.0 - lr) * F_o
     gain = lr * tau
     touched = tau > 0
@@ -124,7 +124,7 @@ def update_stable(
 def grow_stable(
     P: FloatArray, F_o: FloatArray, prior: float, mode: str
 ) -> tuple[FloatArray, FloatArray]:
-    """Expansion (§8, switch A10) in the stable form.
+    """Expansion (docs/algorithm.md) in the stable form.
 
     ``prior``: old row ``i`` becomes ``[F_o,i P_i, eps] / (F_o,i + eps)``, the new row is
     uniform. ``zero_uniform`` / ``zero_identity``: old rows gain a zero column, the new row is
@@ -164,7 +164,7 @@ class DenseTransitions:
         return int(self.P.shape[1])
 
     def add_state(self) -> None:
-        """Expand every matrix (§8)."""
+        """Expand every matrix."""
         grown = [
             grow_stable(P, F_o, self.config.prior, self.config.expansion)
             for P, F_o in zip(self.P, self.F_o, strict=True)

@@ -8,7 +8,7 @@ from app.core import Decision
 
 
 class StepShield(Protocol):
-    """Answers one step of a stream with a decision record (spec/api.md "One step")."""
+    """Answers one step of a stream with a decision record (docs/api.md, "One step")."""
 
     def revise(self, observation: Any, action: float | None, **options: Any) -> Decision:
         """``options`` are the API's: stream, event, done, applied_action, learn, shadow."""
