@@ -35,3 +35,15 @@ def test_an_action_bin_or_state_the_model_lacks_is_named(client: TestClient) -> 
     r = client.get("/models/default/states/5")
     assert (r.status_code, r.json()["error"]["code"], r.json()["error"]["field"]) == (
         404, "not_found", "index")
+
+
+def test_the_openapi_schema_names_the_codes_a_client_can_meet(client: TestClient) -> None:
+    schema = client.get("/openapi.json").json()
+    paths = schema["paths"]
+    assert "409" in paths["/models"]["post"]["responses"]
+    assert "503" in paths["/models/{name}/revise"]["post"]["responses"]
+    assert "text/plain" in paths["/metrics"]["get"]["responses"]["200"]["content"]
+    index = next(p for p in paths["/models/{name}/states/{index}"]["get"]["parameters"]
+                 if p["name"] == "index")
+    assert index["schema"]["minimum"] == 0
+    assert client.get("/models/default/states/-1").json()["error"]["code"] == "invalid_path"

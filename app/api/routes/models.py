@@ -11,7 +11,7 @@ from fastapi.responses import JSONResponse
 from app.api.deps import RegistryDep, require_token
 from app.api.errors import InvalidQuery
 from app.api.routes.revise import ERRORS, NamePath
-from app.api.schemas import ModelCreate, ModelList, ModelSummary
+from app.api.schemas import ErrorBody, ModelCreate, ModelList, ModelSummary
 from app.core import InvalidConfig, InvalidSnapshot, ShieldConfig
 from app.service import codec
 from app.service.registry import DEFAULT_MODEL, Model
@@ -27,7 +27,9 @@ def summary(model: Model) -> dict[str, Any]:
             "interventions": dict(c.interventions), "streams": len(model.shield.streams)}
 
 
-@router.post("/models", status_code=status.HTTP_201_CREATED, response_model=ModelSummary)
+@router.post("/models", status_code=status.HTTP_201_CREATED, response_model=ModelSummary,
+             responses={409: {"model": ErrorBody,
+                              "description": "model_exists or too_many_models"}})
 def create_model(body: ModelCreate, registry: RegistryDep) -> dict[str, Any]:
     """Create an empty model with the paper's configuration and the given overrides."""
     try:

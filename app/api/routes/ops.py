@@ -27,7 +27,9 @@ def readyz(registry: RegistryDep) -> JSONResponse:
     return JSONResponse(body, status_code=200 if ready else 503)
 
 
-@router.get("/metrics", dependencies=[Depends(require_token)])
+@router.get("/metrics", dependencies=[Depends(require_token)],
+            responses={200: {"content": {"text/plain": {}},
+                             "description": "Prometheus text format."}})
 def metrics(request: Request) -> Response:
     """Prometheus text format."""
     return Response(generate_latest(request.app.state.metrics.registry),

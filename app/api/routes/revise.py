@@ -24,7 +24,7 @@ from app.core import Decision as CoreDecision
 from app.service.registry import DEFAULT_MODEL, ModelRegistry, Step
 
 ERRORS: dict[int | str, dict[str, object]] = {
-    code: {"model": ErrorBody} for code in (401, 404, 413, 422)
+    code: {"model": ErrorBody} for code in (401, 404, 413, 422, 503)
 }
 router = APIRouter(tags=["revise"], responses=ERRORS)
 NamePath = Annotated[str, Path(pattern=NAME_PATTERN, description="Model name.")]

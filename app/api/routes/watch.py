@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, RedirectResponse, StreamingResponse
 
 from app.api.auth import given_token, token_ok
@@ -70,7 +71,8 @@ async def events(name: NamePath, request: Request, registry: RegistryDep,
 
 
 @router.get("/models/{name}/states/{index}", dependencies=[Depends(require_token)])
-def state(name: NamePath, index: int, registry: RegistryDep,
+def state(name: NamePath, index: Annotated[int, PathParam(ge=0, description="State index.")],
+          registry: RegistryDep,
           top: Annotated[int, Query(ge=1, le=50)] = 5) -> dict[str, Any]:
     """One state and, per action, its most likely next states."""
     model = registry.get(name)
