@@ -6,8 +6,9 @@
 #   EVAL=1 results/risk-reviser.sh   the evaluation seeds (base 1000), 300 episodes a run:
 #                                    results/reduced/risk-reviser/ROW, risk-reviser.md
 # The rows: the paper reviser as ShieldConfig.paper() has it (the default until commit
-# 5c3ff1b), the risk reviser activated after 50 episodes like it, and today's default (the
-# risk reviser from the first episode; on seed 4 also the paper reviser from the first).
+# 5c3ff1b), the risk reviser activated after 50 episodes (today's default), the same from the
+# first episode (tried and not kept; on seed 4 also the paper reviser from the first) and
+# with a horizon of 24 steps.
 # ROWS="name=overrides ..." (one per line) replaces them. The other rows under
 # results/tuning/risk-reviser (risk-t*) counted only tried actions in the safest
 # continuation: they regenerate at commit 1202fea with their folder's overrides (in each
@@ -17,7 +18,8 @@ cd "$(dirname "$0")/.."
 source scripts/_venv.sh
 rows=${ROWS:-'paper-default={"reviser":{"method":"paper","activate_after_episodes":50}}
 risk-default={"reviser":{"method":"risk","activate_after_episodes":50}}
-risk-act0={}'}
+risk-act0={"reviser":{"activate_after_episodes":0}}
+risk-h24={"risk":{"horizon":24}}'}
 if [ -n "${EVAL:-}" ]; then
     seeds=1000 episodes=300
 else
