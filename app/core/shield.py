@@ -161,7 +161,9 @@ class Shield:
         self._low = self._warp(low)
         self._range = high - low if self._double else self._warp(high) - self._low
         self._directions = [c.direction for c in cfg.criteria]
-        self._a_max = max(abs(cfg.action.low), abs(cfg.action.high))
+        # the paper's a_max bounds a range symmetric about 0: the half-width, so that the
+        # revision noise follows the width of any range, not where it lies
+        self._a_max = (cfg.action.high - cfg.action.low) / 2
         self.reset()
 
     def reset(self) -> None:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from app.core import (
+    ActionSpec,
     ClusteringConfig,
     LimitsConfig,
     ReviserConfig,
@@ -383,3 +384,19 @@ def test_paper_literal_preset_takes_the_literal_reading_everywhere() -> None:
     # the paper's values stay
     assert (literal.clustering.rho, literal.clustering.epsilon) == (0.7, 0.3)
     assert literal.reviser.activate_after_episodes == 50
+
+
+def test_the_revision_noise_follows_the_width_of_the_action_range() -> None:
+    """The same trap on [-2, 2] and on [0, 4]: the paper's V uses the half-width (2 in both),
+    so the revisions spread alike around their bins, wherever the range lies."""
+    spreads = []
+    for low, high in ((-2.0, 2.0), (0.0, 4.0)):
+        config = dataclasses.replace(
+            cliff_config(activate_after_episodes=0, one_sided=False),
+            action=ActionSpec(low=low, high=high))
+        shield = Shield(config)
+        for _ in range(4):
+            shield.step([1.0], None, event="collision", done=True)
+        applied = [shield.step([1.0], low + 2.0).action for _ in range(300)]
+        spreads.append(float(np.std([a for a in applied if a is not None])))
+    assert spreads[0] == pytest.approx(spreads[1])
