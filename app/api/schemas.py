@@ -126,15 +126,14 @@ class ModelCreate(BaseModel):
     config: dict[str, Any] = Field(
         default_factory=dict,
         description="Overrides of the paper's car-following configuration: observation "
-        "(names, low, high, knee, knee_shape, features, cluster_raw), "
+        "(names, low, high, knee, features, cluster_raw), "
         "action (low, high, step, out_of_range), criteria ([{name, direction}]), "
-        "clustering (rho, epsilon, creation_rule, spread, min_variance, failure_states), "
+        "clustering (rho, epsilon, creation_rule, spread, min_variance), "
         "transitions (learning_rate, prior, on_new_state, expansion, action_source, "
         "across_episodes, on_replace), reviser (activate_after_episodes, noise_k, noise, "
-        "horizon, transpose, inspect, search, multi_step, flags, flag_min_rate, flag_rate_per, "
-        "failure_centres, one_sided, noise_side, seed, method: risk or paper), "
-        "risk (horizon, threshold, margin, prior_safe, refresh_steps, precursor_steps, "
-        "precursor_spacing), "
+        "horizon, transpose, inspect, search, multi_step, flags, flag_min_rate, one_sided, "
+        "seed, method: risk or paper), "
+        "risk (horizon, threshold, margin, prior_safe, refresh_steps), "
         "limits (max_states, belief_top_k, tpm_backend).",
         examples=[{"clustering": {"epsilon": 0.1}, "reviser": {"seed": 7}}],
     )

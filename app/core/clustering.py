@@ -120,13 +120,8 @@ class EvolvingClusterer:
         d2 = self._sq_norms[:n] - 2.0 * (self._centres[:n] @ z) + sq_norm
         return np.maximum(d2, 0.0, out=d2)
 
-    def learn_one(self, z: FloatArray, failure: bool = False) -> StateUpdate:
-        """Cluster one normalised observation; may create or move one state.
-
-        ``failure``: the observation ends an episode in a failure. With ``failure_states`` on,
-        a failure that neither potential rule places and that lies outside its nearest state's
-        radius creates a state.
-        """
+    def learn_one(self, z: FloatArray) -> StateUpdate:
+        """Cluster one normalised observation; may create or move one state."""
         cfg = self.config
         self.k += 1
         k = self.k
@@ -155,8 +150,6 @@ class EvolvingClusterer:
             candidate = p_new > p_max
             replace = p_new / p_max - delta / cfg.epsilon >= 1.0
 
-        if not candidate and failure and cfg.failure_states:
-            candidate, replace = delta > self._radii[nearest], False  # outside its zone
         if candidate and replace:
             self._centres[nearest] = z
             self._sq_norms[nearest] = theta
@@ -173,17 +166,6 @@ class EvolvingClusterer:
             update = StateUpdate("assigned", nearest, d2)
         self._accumulate(z, theta)
         return update
-
-    def add_centre(self, z: FloatArray) -> int | None:
-        """Make ``z`` a state of its own (unless ``max_states`` is reached), with the potential
-        it has among the samples so far; the samples themselves are unchanged."""
-        if self._n >= self.max_states:
-            self.capacity_hits += 1
-            return None
-        k = self.k + 1
-        theta = float(z @ z)
-        potential = (k - 1) / ((k - 1) * (theta + 1.0) + self.sigma - 2.0 * float(z @ self.beta))
-        return self._add(z, potential=potential if k > 1 else 1.0)
 
     def _add(self, z: FloatArray, potential: float) -> int:
         n = self._n

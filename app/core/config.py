@@ -2,7 +2,8 @@
 
 Every gap of the paper is a named switch (docs/algorithm.md lists them with the choice made);
 :meth:`ShieldConfig.paper_literal` sets all of them to the literal reading. Values are checked
-on construction and errors name the dotted field at fault.
+on construction and errors name the dotted field at fault. Stored configurations carry their
+format's ``version``; :meth:`ShieldConfig.from_stored` migrates older ones.
 """
 
 from __future__ import annotations
@@ -64,20 +65,16 @@ class ObservationSpec:
 
     ``knee`` (not in the paper) gives a dimension a positive knee k within which it counts
     more, so that close headways get finer states than far ones; 0 (or an empty ``knee``)
-    keeps a dimension linear. ``knee_shape`` ``double`` (the default) counts every unit within
-    k of zero twice, ``x + clip(x, -k, k)``, and scales by the bounds as if linear: the close
-    range spans twice as much of the clustering space and the far range keeps its resolution.
-    ``log`` maps through the signed log ``k ln(1 + |x| / k)`` instead: linear well below k,
-    coarser above (which cost runs that fell behind). The default knee of 20 m on the headway
-    gave the seconds before a crash states of their own that the flags can mark
-    (results/README.md, "A knee that keeps the far range"; tuned on seeds 4 and 5).
+    keeps a dimension linear. Every unit within k of zero counts twice, ``x + clip(x, -k, k)``,
+    scaled by the bounds as if linear: the close range spans twice as much of the clustering
+    space and the far range keeps its resolution. The default knee of 20 m on the headway
+    gives the seconds before a crash states of their own (docs/research-log.md).
     """
 
     names: tuple[str, ...] = ("v_ego", "headway", "v_lead")
     low: tuple[float, ...] = (0.0, 0.0, 0.0)  # [m/s, m, m/s]
     high: tuple[float, ...] = (32.0, 50.0, 32.0)  # [m/s, m, m/s]
     knee: tuple[float, ...] = (0.0, 20.0, 0.0)  # [m/s, m, m/s]; empty or one per name
-    knee_shape: Literal["log", "double"] = "double"
 
     features: tuple[Feature, ...] = ()
     cluster_raw: bool = True  # cluster the (scaled) observation itself beside the features
@@ -178,11 +175,6 @@ class ClusteringConfig:
     creation_rule: Literal["ets_plus", "ets2004"] = "ets_plus"  # A2
     spread: Literal["radius", "member_variance", "ets2004"] = "radius"  # A9
     min_variance: float = 1e-4
-    # Not in the paper: a failure observed outside its nearest state's zone of influence is a
-    # new situation, so it becomes a state of its own rather than widening a state of safe
-    # driving (eTS+ creates states only from potentials, which a rare failure seldom tops or
-    # undercuts). Off: level with it on two tuning seeds (results/README.md)
-    failure_states: bool = False
 
     def __post_init__(self) -> None:
         _check(0.0 <= self.rho <= 1.0, "rho", "rho lies in [0, 1]")
@@ -229,41 +221,14 @@ class ReviserConfig:
     inspect: Literal["any", "first_index"] = "any"  # A5
     search: Literal["fixed", "literal"] = "fixed"  # A6
     multi_step: Literal["iterate", "single"] = "iterate"  # A11
-    # "rate" (count-based) replaces "sticky" flags (unfavourable flags never cleared): with
-    # sticky flags nearly every state ended up flagged and the reviser braked everywhere
-    # (results/README.md, tuned on seeds 0-1)
-    flags: Literal["sticky", "overwrite", "rate"] = "rate"
-    flag_min_rate: float = 0.05  # "rate" flags: the share of failures that flags a state
-    # What "rate" flags count failures against: every recognition of the state, or only the
-    # entries into it (a stream's step that recognises it after another state, or first). A
-    # state where cars wait stopped behind a stopped lead is recognised for minutes per visit,
-    # which dilutes the crashes that end there. Per entry at 0.05 won on both tuning seeds,
-    # the evaluation seeds and the paper's protocol against per recognition at 0.002
-    # (results/README.md, "Sticky flags, or flags per entry"); stored configurations without
-    # the fields keep the latter (ADDED_WITH)
-    flag_rate_per: Literal["recognition", "entry"] = "entry"
-    # Not in the paper: a state whose centre is the observation of a failure keeps that
-    # failure's flag while the centre stays there. Late in the paper's protocol with flags per
-    # entry, 582 of the 719 collisions in states not flagged at the end were recognised in
-    # states centred on a collision, passed so often without one that the rate flag lifted
-    # (results/README.md, "Flags per entry at 0.05 in the paper's protocol")
-    failure_centres: bool = False
-    # Not in the paper: a revision never goes past the proposal the wrong way. Alg. 2 returns
-    # the chosen bin's midpoint plus noise, so against a collision it can brake less than the
-    # controller asked (at full braking, bin 0's midpoint -1.9 plus noise of std 1.41). On by
-    # default since it won on tuning seeds 4 and 5 and on the evaluation seeds
-    # (results/README.md, "One-sided revisions"); added off, which stored configurations
-    # without the field keep (ADDED_WITH)
+    # A4: "overwrite" re-flags the recognised state on every step (the literal reading);
+    # "rate" flags a state by the criterion whose failures make up at least flag_min_rate of
+    # the entries into it (docs/algorithm.md)
+    flags: Literal["overwrite", "rate"] = "rate"
+    flag_min_rate: float = 0.05
+    # Not in the paper: a revision never goes past the proposal the wrong way (Alg. 2's bin
+    # midpoint plus noise can brake less than the controller asked)
     one_sided: bool = True
-    # Not in the paper: which way the revision noise may move a revision. "both" is the
-    # paper's N(0, V). "away" folds it away from the predicted criterion (slower against a
-    # collision, faster against falling behind): the same spread for exploration, but it never
-    # takes a revision back towards the proposal. Why: one-sided revisions cut the noise at the
-    # proposal, and a step trace of today's default on tuning seed 4 found 32% of the
-    # revisions against a collision, and 44% in the ten steps before one, applied within
-    # 0.05 m/s^2 of the proposal. Off: ahead on tuning seed 4, behind on seed 5
-    # (results/README.md, "The revision noise folded away from the criterion")
-    noise_side: Literal["both", "away"] = "both"
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -281,14 +246,9 @@ class RiskConfig:
     An action is kept when its risk (the probability, summed over criteria, of a failure
     within ``horizon`` steps under the safest known continuation) is at most ``threshold`` or
     within ``margin`` of the safest action's; otherwise the nearest allowed action replaces
-    it. The defaults act on any measurable difference (docs/risk-reviser.md: with DDPG on
-    tuning seed 4, threshold 0.05 / margin 0.02 revised too little, margin 0 too much).
+    it. The defaults act on any measurable difference (docs/risk-reviser.md).
     ``prior_safe`` is the number of safe pseudo-tries every (state, action) starts with. The
     risk table is rebuilt at every episode end and after ``refresh_steps`` steps.
-
-    ``precursor_steps``: at a failure, the stream's last observations before it become
-    states of their own where no state lies within ``precursor_spacing`` x epsilon, so that the
-    model is fine where outcomes differ and coarse elsewhere (bounded by ``max_states``).
     """
 
     horizon: int = 8
@@ -296,8 +256,6 @@ class RiskConfig:
     margin: float = 0.001
     prior_safe: float = 1.0
     refresh_steps: int = 500
-    precursor_steps: int = 0
-    precursor_spacing: float = 0.5
 
     def __post_init__(self) -> None:
         _check(1 <= self.horizon <= 256, "horizon", "horizon lies in [1, 256]")
@@ -306,8 +264,6 @@ class RiskConfig:
         _check(math.isfinite(self.prior_safe) and self.prior_safe > 0, "prior_safe",
                "must be positive")
         _check(1 <= self.refresh_steps <= 10**9, "refresh_steps", "lies in [1, 1e9]")
-        _check(0 <= self.precursor_steps <= 64, "precursor_steps", "lies in [0, 64]")
-        _check(0.0 < self.precursor_spacing <= 10.0, "precursor_spacing", "lies in (0, 10]")
 
 
 @dataclass(frozen=True)
@@ -384,41 +340,71 @@ class ShieldConfig:
         return None
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-able data; :meth:`from_dict` inverts it."""
-        data = dataclasses.asdict(self)
-        return _lists(data)  # type: ignore[no-any-return]
+        """Plain JSON-able data with the stored format's ``version``; :meth:`from_dict` and
+        :meth:`from_stored` invert it."""
+        return {"version": CONFIG_VERSION, **_lists(dataclasses.asdict(self))}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> ShieldConfig:
-        """Build a configuration from nested plain data; missing fields take their defaults."""
+        """Build a configuration from nested plain data; missing fields take their defaults.
+        ``version``, if given, must be this format's (older ones: :meth:`from_stored`)."""
+        if not isinstance(data, Mapping):
+            raise InvalidConfig("expected an object")
+        if "version" in data:
+            if data["version"] != CONFIG_VERSION:
+                raise InvalidConfig(f"expected version {CONFIG_VERSION}; a stored configuration "
+                                    "of an older version loads through from_stored",
+                                    field="version")
+            data = {key: value for key, value in data.items() if key != "version"}
         return _build(cls, data, "")
 
     @classmethod
     def from_stored(cls, data: Mapping[str, Any]) -> ShieldConfig:
-        """A whole configuration that :meth:`to_dict` wrote, maybe by an older version: a
-        field it lacks takes the value that keeps the behaviour of its time (the value the
-        field was added with, where the default has changed since), so a stored model or
-        record decides as it did when it was written."""
+        """A whole configuration that :meth:`to_dict` wrote, maybe by an older version of this
+        package, migrated to this format so that it decides as it did when it was written; one
+        that used a switch since removed is refused (:class:`InvalidConfig` names the field)."""
         if not isinstance(data, Mapping):
             raise InvalidConfig("expected an object")
-        filled = {key: dict(value) if isinstance(value, Mapping) else value
-                  for key, value in data.items()}
-        for (section, name), value in ADDED_WITH.items():
-            part = filled.get(section)
-            if isinstance(part, dict):
-                part.setdefault(name, value)
-        return cls.from_dict(filled)
+        if data.get("version", 1) == 1:
+            data = _from_version_1(data)
+        return cls.from_dict(data)
 
 
-# Fields whose default changed after they were added, with the value they were added with.
-ADDED_WITH: dict[tuple[str, str], Any] = {
-    ("reviser", "method"): "paper",
-    ("reviser", "one_sided"): False,
-    ("observation", "knee"): (),
-    ("observation", "knee_shape"): "log",
-    ("reviser", "flag_min_rate"): 0.002,
-    ("reviser", "flag_rate_per"): "recognition",
-}
+CONFIG_VERSION = 2
+
+
+def _from_version_1(data: Mapping[str, Any]) -> dict[str, Any]:
+    """Version 1 (no ``version`` field) to 2. A field that version 1 lacked takes the value it
+    was added with, where the default has changed since; the switches removed in version 2 lost
+    their trials (docs/research-log.md) and must hold the value whose behaviour remains."""
+    out = {key: dict(value) if isinstance(value, Mapping) else value
+           for key, value in data.items()}
+    sections = {name: part for name, part in out.items() if isinstance(part, dict)}
+    observation = sections.get("observation", {})
+    reviser = sections.get("reviser", {})
+    for name, value in (("method", "paper"), ("one_sided", False), ("flag_min_rate", 0.002)):
+        reviser.setdefault(name, value)
+    if "observation" in sections and "knee" not in observation:
+        observation["knee"] = []
+    curved = isinstance(observation.get("knee"), list | tuple) and any(observation["knee"])
+    flags_rate = reviser.get("method") == "paper" and reviser.get("flags") == "rate"
+    removed = (  # section, field, its value when missing, the value that remains, whether it counts
+        ("observation", "knee_shape", "log", "double", curved),
+        ("clustering", "failure_states", False, False, True),
+        ("reviser", "failure_centres", False, False, True),
+        ("reviser", "noise_side", "both", "both", True),
+        ("reviser", "flag_rate_per", "recognition", "entry", flags_rate),
+        ("risk", "precursor_steps", 0, 0, True),
+        ("risk", "precursor_spacing", None, None, False),
+    )
+    for section, name, missing, remains, counts in removed:
+        part = sections.get(section, {})
+        value = part.pop(name, missing)
+        if counts and value != remains:
+            raise InvalidConfig(f"{section}.{name} = {value!r} was removed in configuration "
+                                f"version {CONFIG_VERSION}; this version cannot reproduce it",
+                                field=f"{section}.{name}")
+    return out
 
 
 def _lists(value: Any) -> Any:

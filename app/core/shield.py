@@ -118,7 +118,6 @@ class StreamState:
     applied_bin: int = 0
     proposed_bin: int = 0
     step: int = 0
-    recent: list[FloatArray] = field(default_factory=list)  # the last normalised observations
 
 
 @dataclass
@@ -156,10 +155,9 @@ class Shield:
         knee = np.array(cfg.observation.knee or [0.0] * self._dim)
         self._curved = knee > 0 if knee.any() else None  # the dimensions with a knee
         self._knee = np.where(knee > 0, knee, 1.0)
-        self._double = cfg.observation.knee_shape == "double"
         low, high = np.array(cfg.observation.low), np.array(cfg.observation.high)
         self._low = self._warp(low)
-        self._range = high - low if self._double else self._warp(high) - self._low
+        self._range: FloatArray = high - low
         self._directions = [c.direction for c in cfg.criteria]
         # the paper's a_max bounds a range symmetric about 0: the half-width, so that the
         # revision noise follows the width of any range, not where it lies
@@ -172,8 +170,7 @@ class Shield:
         self.clusterer = EvolvingClusterer(cfg.clustering, self._zdim, cfg.limits.max_states)
         self.transitions: TransitionModel = self._new_transitions()
         self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria),
-                                cfg.reviser.flag_min_rate, cfg.reviser.flag_rate_per,
-                                cfg.reviser.failure_centres)
+                                cfg.reviser.flag_min_rate)
         self.outcomes = risk.OutcomeCounts(cfg.action.n_bins, len(cfg.criteria),
                                            cfg.limits.max_states)
         self._risk_table = np.zeros((0, cfg.action.n_bins, len(cfg.criteria)))
@@ -196,7 +193,7 @@ class Shield:
 
     def normalise(self, observation: FloatArray) -> FloatArray:
         """Physical units to the clustering space: ``(z - low) / (high - low)``, z and low
-        through their dimension's knee first (and high too, for the log knee), followed by the
+        through their dimension's knee first, followed by the
         configured features, each clipped to its range and scaled by it."""
         parts = []
         if self._raw:
@@ -225,24 +222,17 @@ class Shield:
         if self._curved is None:
             return warped
         k = self._knee
-        if self._double:
-            inner = np.abs(warped) <= 2 * k
-            unwarped = np.where(inner, warped / 2, warped - np.sign(warped) * k)
-        else:
-            unwarped = np.sign(warped) * k * np.expm1(np.abs(warped) / k)
+        inner = np.abs(warped) <= 2 * k
+        unwarped = np.where(inner, warped / 2, warped - np.sign(warped) * k)
         out: FloatArray = np.where(self._curved, unwarped, warped)
         return out
 
     def _warp(self, x: FloatArray) -> FloatArray:
-        """Each dimension with a knee k > 0 through its shape: the signed log
-        ``k ln(1 + |x| / k)``, or ``x + clip(x, -k, k)`` (``double``)."""
+        """Each dimension with a knee k > 0 counts its first k twice: ``x + clip(x, -k, k)``."""
         if self._curved is None:
             return x
         k = self._knee
-        if self._double:
-            warped = x + np.clip(x, -k, k)
-        else:
-            warped = np.sign(x) * k * np.log1p(np.abs(x) / k)
+        warped = x + np.clip(x, -k, k)
         out: FloatArray = np.where(self._curved, warped, x)
         return out
 
@@ -350,13 +340,11 @@ class Shield:
         cfg = self.config
         z = self.normalise(step.observation)
         # clustering: a new state expands every TPM
-        update = self.clusterer.learn_one(z, failure=step.event is not None)
+        update = self.clusterer.learn_one(z)
         if update.is_new:
             self._add_state()
         elif update.kind == "replaced" and cfg.transitions.on_replace == "reset":
             self.transitions.reset_row(update.index)  # A16
-        if update.kind != "assigned":  # the observation is a centre now
-            self.flags.place_centre(update.index, step.event)
         # Eq. 1 recognition, after clustering
         belief = recognise(update.sq_distances, self.clusterer.variances(),
                            cfg.limits.belief_top_k)
@@ -386,8 +374,6 @@ class Shield:
         decision = self._decide(step, belief, recognised, update.is_new, state.step, self._rng)
         assert decision.action is not None and step.action is not None
         state.belief = belief
-        if cfg.reviser.method == "risk" and cfg.risk.precursor_steps:
-            state.recent = [*state.recent, z][-cfg.risk.precursor_steps:]
         state.applied_bin = actions.encode(decision.action, cfg.action)
         state.proposed_bin = actions.encode(step.action, cfg.action)
         state.step += 1
@@ -417,9 +403,8 @@ class Shield:
 
     def _learn_outcome(self, state: StreamState, recognised: int, step: StepInput) -> None:
         """Count what the stream's previous action led to: the recognised state, or the
-        failure of this step's event (an absorbing outcome); then, at a failure, give the
-        observations that preceded it states of their own (:class:`RiskConfig`). Only the
-        risk reviser reads them, so the paper's counts nothing here."""
+        failure of this step's event (an absorbing outcome). Only the risk reviser reads them,
+        so the paper's counts nothing here."""
         if state.belief is None or self.config.reviser.method != "risk":
             return
         action_bin = (state.applied_bin if step.applied_action is None
@@ -429,12 +414,6 @@ class Shield:
             self.outcomes.learn_move(previous, action_bin, recognised)
             return
         self.outcomes.learn_failure(previous, action_bin, step.event)
-        spacing = (self.config.risk.precursor_spacing * self.config.clustering.epsilon) ** 2
-        for z in reversed(state.recent):
-            if self.clusterer.sq_distances(z).min() > spacing:
-                if self.clusterer.add_centre(z) is None:
-                    break
-                self._add_state()
 
     def _refresh_risk(self) -> None:
         """Rebuild the risk table from the outcome counts (:func:`risk.horizon_risk`)."""
@@ -551,8 +530,6 @@ class Shield:
         std = reviser.noise_std(cfg.reviser, self._a_max, self.counters.episodes)
         noise = float(rng.normal(0.0, std))
         slower = self._directions[verdict] == "decrease"
-        if cfg.reviser.noise_side == "away":
-            noise = -abs(noise) if slower else abs(noise)
         revised = actions.decode(final, cfg.action) + noise
         revised = min(max(revised, cfg.action.low), cfg.action.high)
         if cfg.reviser.one_sided:
@@ -681,7 +658,6 @@ class Shield:
                     "applied_bin": s.applied_bin,
                     "proposed_bin": s.proposed_bin,
                     "step": s.step,
-                    "recent": [z.copy() for z in s.recent],
                 }
                 for name, s in self.streams.items()
             },
@@ -730,8 +706,7 @@ class Shield:
             self.transitions = LazyTransitions.restore(cfg.action.n_bins, cfg.transitions,
                                                        limit, tpm)
         self.flags = StateFlags.restore(cfg.reviser.flags, limit, len(cfg.criteria),
-                                        cfg.reviser.flag_min_rate, cfg.reviser.flag_rate_per,
-                                        cfg.reviser.failure_centres, data["flags"])
+                                        cfg.reviser.flag_min_rate, data["flags"])
         n = self.clusterer.n_states
         if self.transitions.n_states != n or self.flags.flags.shape[0] != n:
             raise InvalidSnapshot("states, matrices and flags disagree on the state count")
@@ -757,14 +732,12 @@ class Shield:
                 raise InvalidSnapshot("a belief names distinct states", field=f"{field}.index")
             belief = Belief(index, prob)
         q = self.config.action.n_bins
-        recent = [stored.floats(z, f"{field}.recent.{i}", (self._zdim,))
-                  for i, z in enumerate(data.get("recent", []))]
         return StreamState(belief,
                            stored.integer(data["applied_bin"], f"{field}.applied_bin",
                                           high=q - 1),
                            stored.integer(data["proposed_bin"], f"{field}.proposed_bin",
                                           high=q - 1),
-                           stored.integer(data["step"], f"{field}.step"), recent)
+                           stored.integer(data["step"], f"{field}.step"))
 
     def _restore_risk(self, data: dict[str, Any], n: int) -> None:
         """The outcome counts and the risk table; a format-2 snapshot (from before the risk

@@ -186,8 +186,7 @@ def _revision_sizes(episodes: list[list[dict[str, Any]]], criteria: list[str]) -
 def _failure_states(episodes: list[list[dict[str, Any]]], criteria: list[str]) -> str:
     """Per run, the states the failures came from (the state of each failed episode's last
     decision) against how often each was recognised: a state whose failures are a small share
-    of its recognitions (or of the entries into it, which the default counts) is not flagged
-    by count-based flags."""
+    of the entries into it is not flagged by count-based flags."""
     recognised: Counter[tuple[int, int]] = Counter(
         (s["run"], s["s"]) for e in episodes for s in e)
     failures: dict[tuple[int, int], Counter[str]] = defaultdict(Counter)

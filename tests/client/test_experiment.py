@@ -76,8 +76,9 @@ def test_records_made_under_other_shield_defaults_are_refused(tmp_path: Path) ->
 
 def test_records_from_before_a_switch_existed_keep_the_value_it_was_added_with(
         tmp_path: Path) -> None:
-    """``reviser.one_sided`` was added off and is on by default now: a header that lacks it
-    ran with it off, so only the overrides that turn it off again go on with those records."""
+    """``reviser.one_sided`` was added off and is on by default now: a header of the stored
+    format's version 1 that lacks it ran with it off, so only the overrides that turn it off
+    again go on with those records."""
     arm = "idm-aggressive+shield"
     off = dataclasses.replace(CONFIG, shield_config={
         "reviser": {"activate_after_episodes": 2, "one_sided": False}})
@@ -85,7 +86,9 @@ def test_records_from_before_a_switch_existed_keep_the_value_it_was_added_with(
     path = records.path_for(tmp_path, arm, 0)
     lines = path.read_text().splitlines(keepends=True)
     header = json.loads(lines[0])
-    del header["header"]["shield"]["reviser"]["one_sided"]  # written before the field existed
+    old = header["header"]["shield"]
+    del old["version"], old["reviser"]["one_sided"]  # version 1, before the field existed
+    old["observation"]["knee_shape"], old["reviser"]["flag_rate_per"] = "double", "entry"
     path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
     assert runner.run_one(off, arm, 0, tmp_path) == 0  # the same shield: nothing to do
     header["header"]["identity"] = CONFIG.identity()  # as if run without the override
@@ -624,13 +627,14 @@ def test_an_unreachable_shield_releases_the_run(tmp_path: Path) -> None:
 
 def test_the_paper_protocol_script_runs_every_shielded_run_on_its_own_service(
         tmp_path: Path) -> None:
-    """results/paper-protocol.sh at a toy size: its services start, each shielded run gets one,
-    the report is written and the services are gone afterwards."""
+    """results/scripts/paper-protocol.sh at a toy size: its services start, each shielded run
+    gets one, the report is written and the services are gone afterwards."""
     root = Path(__file__).resolve().parents[2]
     port = free_port()
     env = {**os.environ, "RUNS": "2", "EPISODES": "2", "PORT": str(port),
            "PYTHON": sys.executable, "LOG_LEVEL": "info"}  # info: every request logged
-    result = subprocess.run(["bash", str(root / "results/paper-protocol.sh"), str(tmp_path)],
+    script = root / "results/scripts/paper-protocol.sh"
+    result = subprocess.run(["bash", str(script), str(tmp_path)],
                             env=env, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     headers, episodes = records.read_all(tmp_path)
@@ -657,13 +661,14 @@ def test_the_paper_protocol_script_trains_in_lockstep_groups_against_batch_servi
     env = {**os.environ, "RUNS": "3", "EPISODES": "2", "PORT": str(port),
            "PYTHON": sys.executable, "LOCKSTEP": "1", "GROUP": "2", "DDPG_GROUP": "3",
            "TRANSPORT": "batch", "SERVICES": "2", "LOG_LEVEL": "info",
-           "SHIELD_CONFIG": '{"reviser": {"flags": "sticky"}}'}
-    result = subprocess.run(["bash", str(root / "results/paper-protocol.sh"), str(tmp_path)],
+           "SHIELD_CONFIG": '{"reviser": {"flags": "overwrite"}}'}
+    script = root / "results/scripts/paper-protocol.sh"
+    result = subprocess.run(["bash", str(script), str(tmp_path)],
                             env=env, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     headers, episodes = records.read_all(tmp_path)
-    assert all(h["config"]["shield_config"] == {"reviser": {"flags": "sticky"}} for h in headers)
-    assert {h["shield"]["reviser"]["flags"] for h in headers if h["shield"]} == {"sticky"}
+    assert all(h["config"]["shield_config"] == {"reviser": {"flags": "overwrite"}} for h in headers)
+    assert {h["shield"]["reviser"]["flags"] for h in headers if h["shield"]} == {"overwrite"}
     assert {h["config"]["shield"] for h in headers} == {
         f"http://127.0.0.1:{port},http://127.0.0.1:{port + 1}"}
     assert {h["config"]["transport"] for h in headers} == {"batch"}
@@ -675,7 +680,7 @@ def test_the_paper_protocol_script_trains_in_lockstep_groups_against_batch_servi
     machine = (tmp_path / "machine.txt").read_text()
     assert "ddpg in groups of 3 runs, ddpg+shield in groups of 2" in machine
     assert "2 shield service(s), batch" in machine and "wall:" in machine
-    assert 'shield overrides: {"reviser": {"flags": "sticky"}}' in machine
+    assert 'shield overrides: {"reviser": {"flags": "overwrite"}}' in machine
     for offset in (0, 1):
         with pytest.raises(httpx.TransportError):
             httpx.get(f"http://127.0.0.1:{port + offset}/healthz", timeout=1)
@@ -684,7 +689,8 @@ def test_the_paper_protocol_script_trains_in_lockstep_groups_against_batch_servi
 def test_the_paper_protocol_script_refuses_an_unknown_transport(tmp_path: Path) -> None:
     root = Path(__file__).resolve().parents[2]
     env = {**os.environ, "PYTHON": sys.executable, "TRANSPORT": "http"}
-    result = subprocess.run(["bash", str(root / "results/paper-protocol.sh"), str(tmp_path)],
+    script = root / "results/scripts/paper-protocol.sh"
+    result = subprocess.run(["bash", str(script), str(tmp_path)],
                             env=env, capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     assert result.stderr.strip() == "TRANSPORT: ws or batch, not http"
@@ -760,3 +766,15 @@ def test_compare_keeps_experiments_of_the_same_name_apart(tmp_path: Path) -> Non
     assert rows == ["| seed-3/idm: idm-aggressive", "| seed-4/idm: idm-aggressive"]
     with pytest.raises(records.RecordError, match="given twice"):
         report.compare([tmp_path / "seed-3" / "idm", tmp_path / "seed-3" / "idm"])
+
+
+def test_the_experiment_entry_point_lists_and_refuses_an_unknown_name() -> None:
+    root = Path(__file__).resolve().parents[2]
+    listed = subprocess.run(["bash", str(root / "scripts/experiment")], capture_output=True,
+                            text=True, timeout=30)
+    assert listed.returncode == 0
+    names = [line.split()[0] for line in listed.stdout.splitlines()]
+    assert "paper-protocol" in names and "default-switch" in names
+    unknown = subprocess.run(["bash", str(root / "scripts/experiment"), "no-such"],
+                             capture_output=True, text=True, timeout=30)
+    assert unknown.returncode == 2 and "scripts/experiment lists them" in unknown.stderr

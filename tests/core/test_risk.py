@@ -126,8 +126,7 @@ def test_the_shield_learns_to_refuse_the_action_that_crashed() -> None:
 
 
 def test_the_risk_reviser_is_deterministic_and_round_trips_its_snapshot() -> None:
-    config = ShieldConfig.from_dict({"risk": {"precursor_steps": 4},
-                                     "reviser": {**RISK, "activate_after_episodes": 5}})
+    config = ShieldConfig.from_dict({"reviser": {**RISK, "activate_after_episodes": 5}})
     a, b = Shield(config), Shield(config)
     crash_world(a, 30, seed=3)
     crash_world(b, 30, seed=3)
@@ -184,23 +183,6 @@ def test_features_are_clustered_beside_or_instead_of_the_observation() -> None:
         {"observation": {"features": [closing], "cluster_raw": False}}))
     assert alone.normalise(np.array([20.0, 30.0, 15.0])).tolist() == [0.75]
     assert alone.physical(np.array([0.75])).tolist() == [5.0]
-
-
-@pytest.mark.parametrize("steps", [1, 3])
-def test_precursor_states_are_the_last_observations_before_a_failure(steps: int) -> None:
-    config = ShieldConfig.from_dict({"reviser": RISK, "risk": {"precursor_steps": steps}})
-    shield = Shield(config)
-    for t in range(10):
-        shield.step([10.0, 50.0 - 4 * t, 10.0], 0.0)
-    recent = list(shield.streams["0"].recent)
-    assert len(recent) == steps
-    assert recent[-1] == pytest.approx(shield.normalise(np.array([10.0, 14.0, 10.0])))
-    before = shield.n_states
-    shield.step([10.0, 0.0, 10.0], None, event="collision", done=True)
-    assert shield.n_states - before <= steps + 1  # the failure's own state and the precursors
-    spacing = config.risk.precursor_spacing * config.clustering.epsilon
-    for z in recent:  # each observation before the failure now has a state nearby
-        assert shield.clusterer.sq_distances(z).min() <= spacing**2
 
 
 def test_the_paper_reviser_counts_no_outcomes() -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ import pytest
 from app.core import (
     ActionSpec,
     InvalidAction,
+    InvalidConfig,
     InvalidObservation,
     InvalidSnapshot,
     LimitsConfig,
@@ -154,11 +156,9 @@ def test_same_seed_same_stream_gives_bit_identical_models_and_decisions() -> Non
     assert pairs_c != pairs_a  # the revision noise comes from the seed
 
 
-@pytest.mark.parametrize("failure_centres", [False, True])
-def test_snapshot_restore_makes_the_same_decisions(failure_centres: bool) -> None:
-    shield = Shield(cliff_config(activate_after_episodes=5, failure_centres=failure_centres))
+def test_snapshot_restore_makes_the_same_decisions() -> None:
+    shield = Shield(cliff_config(activate_after_episodes=5))
     run_cliff(shield, 30, seed=4)
-    assert shield.flags.centres.any()  # the cliff's crashes place centres
     copy = Shield.from_snapshot(shield.snapshot())
     assert_same(copy.snapshot(), shield.snapshot())
     _, original = run_cliff(shield, 30, seed=9)
@@ -167,36 +167,81 @@ def test_snapshot_restore_makes_the_same_decisions(failure_centres: bool) -> Non
     assert_same(copy.snapshot(), shield.snapshot())
 
 
-def test_a_snapshot_from_before_a_switch_restores_with_the_behaviour_of_its_time() -> None:
-    """A switch added off and turned on by default later (``reviser.one_sided``): a snapshot
-    written before the switch existed lacks it and must go on deciding as it did."""
+def version_1(config: dict[str, Any]) -> dict[str, Any]:
+    """A configuration as version 1 of the stored format wrote it: no ``version``, with the
+    switches removed since at the values whose behaviour remains."""
+    old = {key: dict(value) if isinstance(value, dict) else value
+           for key, value in config.items() if key != "version"}
+    old["observation"]["knee_shape"] = "double"
+    old["clustering"]["failure_states"] = False
+    old["reviser"].update(flag_rate_per="entry", failure_centres=False, noise_side="both")
+    old["risk"].update(precursor_steps=0, precursor_spacing=0.5)
+    return old
+
+
+def test_a_version_1_snapshot_restores_and_decides_as_it_did() -> None:
+    """A field added off and turned on by default later (``reviser.one_sided``): a snapshot
+    written before it existed lacks it and must go on deciding as it did; the removed
+    switches at their remaining values drop out; the flags' entries, not yet counted then,
+    count from the restore on."""
     shield = Shield(cliff_config(activate_after_episodes=5, one_sided=False))
     run_cliff(shield, 30, seed=4)
     old = shield.snapshot()
-    del old["config"]["reviser"]["one_sided"]
+    old["config"] = version_1(old["config"])
+    del old["config"]["reviser"]["one_sided"], old["flags"]["entries"]
     copy = Shield.from_snapshot(old)
     assert copy.config == shield.config
-    _, original = run_cliff(shield, 30, seed=9)
-    _, restored = run_cliff(copy, 30, seed=9)
-    assert restored == original
-
-
-def test_a_snapshot_from_before_entries_were_counted_restores_and_counts_on() -> None:
-    shield = Shield(cliff_config(activate_after_episodes=5, flag_rate_per="recognition",
-                                 flag_min_rate=0.002))
-    run_cliff(shield, 30, seed=4)
-    old = shield.snapshot()
-    del old["flags"]["entries"], old["flags"]["centres"]
-    for name in ("flag_rate_per", "flag_min_rate"):  # written before these fields existed
-        del old["config"]["reviser"][name]
-    copy = Shield.from_snapshot(old)
-    assert copy.config == shield.config  # its flags still count recognitions, at 0.002
     assert copy.flags.entries.tolist() == [0] * copy.n_states
-    assert copy.flags.centres.tolist() == [0] * copy.n_states
     _, original = run_cliff(shield, 30, seed=9)
     _, restored = run_cliff(copy, 30, seed=9)
     assert restored == original
     assert copy.flags.entries.sum() > 0
+
+
+@pytest.mark.parametrize(("section", "name", "value"), [
+    ("observation", "knee_shape", "log"),
+    ("clustering", "failure_states", True),
+    ("reviser", "failure_centres", True),
+    ("reviser", "noise_side", "away"),
+    ("reviser", "flag_rate_per", "recognition"),
+    ("risk", "precursor_steps", 4),
+])
+def test_a_stored_configuration_with_a_removed_switch_is_refused_by_name(
+        section: str, name: str, value: Any) -> None:
+    old = version_1(ShieldConfig.paper().to_dict())
+    assert ShieldConfig.from_stored(old) == ShieldConfig.paper()
+    old[section][name] = value
+    with pytest.raises(InvalidConfig) as raised:
+        ShieldConfig.from_stored(old)
+    assert raised.value.field == f"{section}.{name}"
+    snapshot = Shield(ShieldConfig.paper()).snapshot()
+    snapshot["config"] = old
+    with pytest.raises(InvalidSnapshot) as refused:
+        Shield.from_snapshot(snapshot)
+    assert refused.value.field == f"config.{section}.{name}"
+
+
+def test_a_version_1_configuration_lacking_later_fields_keeps_their_first_values() -> None:
+    old = version_1(ShieldConfig.paper().to_dict())
+    for section, name in (("reviser", "method"), ("reviser", "flag_min_rate"),
+                          ("reviser", "flag_rate_per"), ("observation", "knee"),
+                          ("observation", "knee_shape")):
+        del old[section][name]
+    old["reviser"]["flags"] = "overwrite"  # flags per recognition mattered only under "rate"
+    stored = ShieldConfig.from_stored(old)
+    assert (stored.reviser.method, stored.reviser.flag_min_rate) == ("paper", 0.002)
+    assert stored.observation.knee == ()
+    old["reviser"]["flags"] = "rate"
+    with pytest.raises(InvalidConfig, match="removed"):
+        ShieldConfig.from_stored(old)
+
+
+def test_a_configuration_carries_its_version_and_refuses_another() -> None:
+    data = ShieldConfig().to_dict()
+    assert data["version"] == 2 and ShieldConfig.from_dict(data) == ShieldConfig()
+    with pytest.raises(InvalidConfig) as raised:
+        ShieldConfig.from_dict({**data, "version": 3})
+    assert raised.value.field == "version"
 
 
 def test_a_damaged_snapshot_is_refused() -> None:
@@ -232,19 +277,11 @@ def test_states_view_reports_physical_centres() -> None:
     assert states["flag"] == [None] and states["visits"].tolist() == [1]
 
 
-@pytest.mark.parametrize("shape", ["log", "double"])
-def test_a_knee_keeps_the_views_in_physical_units(shape: str) -> None:
-    shield = Shield(ShieldConfig.from_dict(
-        {"observation": {"knee": [0.0, 20.0, 0.0], "knee_shape": shape}}))
+def test_a_knee_keeps_the_views_in_physical_units() -> None:
+    shield = Shield(ShieldConfig.from_dict({"observation": {"knee": [0.0, 20.0, 0.0]}}))
     shield.step([16.0, 100.0, 8.0], 0.0)
     assert shield.states()["centre"][0] == pytest.approx([16.0, 100.0, 8.0])
     assert shield.state_view(0)["centre"] == pytest.approx([16.0, 100.0, 8.0])
-
-
-def test_a_bad_knee_shape_names_its_field() -> None:
-    with pytest.raises(ShieldError) as raised:
-        ShieldConfig.from_dict({"observation": {"knee_shape": "square"}})
-    assert raised.value.field == "observation.knee_shape"
 
 
 @pytest.mark.parametrize("knee", [[20.0], [0.0, -1.0, 0.0], [0.0, math.inf, 0.0]])
@@ -252,19 +289,6 @@ def test_a_bad_knee_names_its_field(knee: list[float]) -> None:
     with pytest.raises(ShieldError) as raised:
         ShieldConfig.from_dict({"observation": {"knee": knee}})
     assert raised.value.field == "observation.knee"
-
-
-@pytest.mark.parametrize(("missing", "knee", "shape"), [
-    (("knee", "knee_shape"), (), "log"),  # stored before either existed: linear
-    (("knee_shape",), (0.0, 20.0, 0.0), "log"),  # stored before the double knee existed
-])
-def test_a_stored_configuration_keeps_the_knee_of_its_time(
-        missing: tuple[str, ...], knee: tuple[float, ...], shape: str) -> None:
-    stored = ShieldConfig.from_dict({"observation": {"knee_shape": "log"}}).to_dict()
-    for name in missing:
-        del stored["observation"][name]
-    observation = ShieldConfig.from_stored(stored).observation
-    assert (observation.knee, observation.knee_shape) == (knee, shape)
 
 
 def test_an_empty_model_has_empty_views_and_snapshots() -> None:

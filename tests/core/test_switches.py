@@ -19,7 +19,6 @@ from app.core import (
 )
 from app.core.belief import Belief
 from app.core.clustering import EvolvingClusterer
-from app.core.flags import StateFlags
 from app.core.lazy_tpm import LazyTransitions
 from app.core.reviser import noise_std, predict_ahead
 from tests.utils import cliff_config
@@ -68,39 +67,6 @@ def test_a2_ets_plus_makes_a_state_for_a_novel_outlier_and_ets2004_does_not() ->
     assert counts == {"ets_plus": 2, "ets2004": 1}
 
 
-# Dense driving near 0 and 0.1, one early outlier at 3 whose low potential keeps the eTS+
-# outlier rule quiet afterwards: a state near 0.1 (radius 0.07) and the state at 3
-OUTLIER_STREAM = [0.0, 0.1] * 5 + [3.0] + [0.0, 0.1] * 5
-
-
-def outlier_clusterer(failure_states: bool) -> EvolvingClusterer:
-    c = EvolvingClusterer(ClusteringConfig(failure_states=failure_states), 1, 10)
-    for z in OUTLIER_STREAM:
-        c.learn_one(np.array([z]))
-    assert c.n_states == 2
-    return c
-
-
-def test_failure_states_give_a_failure_outside_every_zone_a_state_of_its_own() -> None:
-    kinds = {}
-    for on in (False, True):
-        kinds[on] = [outlier_clusterer(on).learn_one(np.array([z]), failure=failure).kind
-                     for z, failure in ((0.6, True), (0.6, False), (0.04, True), (0.13, True))]
-    # 0.6 lies 0.5 from state 0: a new situation only when it ends in a failure; 0.04 lies
-    # within state 0's radius; 0.13 is dense enough for eTS+ to move state 0 onto it anyway
-    assert kinds[False] == ["assigned", "assigned", "assigned", "replaced"]
-    assert kinds[True] == ["new", "assigned", "assigned", "replaced"]
-
-
-def test_failure_states_flag_the_new_state_for_its_criterion() -> None:
-    shield = shield_with(clustering=ClusteringConfig(failure_states=True))
-    for z in OUTLIER_STREAM:
-        shield.step([z / 3.0], 0.0)  # the cliff world observes [0, 1]: the same stream, scaled
-    decision = shield.step([0.2], None, event="collision", done=True)
-    assert decision.new_state and decision.n_states == 3
-    assert shield.state_view(2)["flag"] == "collision"
-
-
 def test_a3_pad_learns_the_transition_into_a_brand_new_state() -> None:
     rows = {}
     for mode in ("skip", "pad"):
@@ -116,26 +82,24 @@ def test_a3_pad_learns_the_transition_into_a_brand_new_state() -> None:
     assert rows["pad"][1] > rows["skip"][1] + 0.005  # pad: 0 -> 1 was learned too
 
 
-def test_a4_sticky_flags_survive_a_later_uneventful_visit() -> None:
-    flags = {}
-    for mode in ("sticky", "overwrite"):
-        shield = shield_with(reviser=paper_reviser(flags=mode))  # type: ignore[arg-type]
-        shield.step([0.9], None, event="collision", done=True)
-        shield.step([0.9], 0.0)
-        flags[mode] = int(shield.flags.flags[0])
-    assert flags == {"sticky": 1, "overwrite": 0}
+def test_a4_overwritten_flags_lift_at_the_next_uneventful_visit() -> None:
+    shield = shield_with(reviser=paper_reviser(flags="overwrite"))
+    shield.step([0.9], None, event="collision", done=True)
+    assert int(shield.flags.flags[0]) == 1
+    shield.step([0.9], 0.0)
+    assert int(shield.flags.flags[0]) == 0
 
 
-def test_a4_rate_flags_follow_the_share_of_failures_among_recognitions() -> None:
-    """Count-based flags (A4 c): a state is flagged while its failures are frequent enough."""
-    shield = shield_with(reviser=paper_reviser(flags="rate", flag_min_rate=0.1,
-                                                flag_rate_per="recognition"))
-    shield.step([0.9], None, event="large_distance", done=True)  # 1 failure, 1 recognition
+def test_a4_rate_flags_follow_the_share_of_failures_among_entries() -> None:
+    """Count-based flags (A4 c): a state is flagged while its failures are frequent enough
+    among the streams that came into it; each criterion counts on its own."""
+    shield = shield_with(reviser=paper_reviser(flags="rate", flag_min_rate=0.1))
+    shield.step([0.9], None, event="large_distance", done=True)  # 1 failure, 1 entry
     assert shield.flags.flags[0] == 2
     for _ in range(9):
-        shield.step([0.9], 0.0)
-    assert shield.flags.flags[0] == 2  # 1 failure in 10 recognitions: exactly 10%
-    shield.step([0.9], 0.0)
+        shield.step([0.9], 0.0, done=True)  # a stream of one step: an entry each
+    assert shield.flags.flags[0] == 2  # 1 failure in 10 entries: exactly 10%
+    shield.step([0.9], 0.0, done=True)
     assert shield.flags.flags[0] == 0  # 1 in 11: the busy state is favourable again
     shield.step([0.9], None, event="collision", done=True)
     assert shield.flags.flags[0] == 0  # each criterion on its own: 1 in 12
@@ -144,50 +108,14 @@ def test_a4_rate_flags_follow_the_share_of_failures_among_recognitions() -> None
     assert shield.state_view(0)["failures"] == {"collision": 2, "large_distance": 1}
 
 
-def test_failure_centres_hold_the_flag_of_a_state_centred_on_a_failure() -> None:
-    """A state that a crash's observation created keeps its flag however often streams come
-    into it without one; counted per entry, the flag lifts."""
-    flags = {}
-    for on in (False, True):
-        shield = shield_with(reviser=paper_reviser(flag_min_rate=0.1, failure_centres=on))
-        for _ in range(20):  # ordinary driving: state 0
-            shield.step([0.1], 0.0)
-            shield.step([0.2], 0.0)
-        shield.step([0.9], None, event="collision", done=True)  # creates state 1 on the crash
-        for _ in range(20):  # 20 more streams into it, none failing
-            shield.step([0.75], 0.0, done=True)
-        assert shield.n_states == 2 and shield.flags.centres.tolist() == [0, 1]
-        assert shield.state_view(1)["entries"] == 21 and shield.state_view(1)["centre"] == [0.9]
-        flags[on] = shield.flags.flags.tolist()
-    assert flags == {False: [0, 0], True: [0, 1]}  # 1 crash in 21 entries: under 10%
-
-
-def test_failure_centres_give_way_by_priority_and_to_a_moved_centre() -> None:
-    flags = StateFlags("rate", 10, 2, 0.5, "entry", failure_centres=True)
-    flags.add_state()
-    flags.place_centre(0, 1)  # created by a large distance's observation
-    assert flags.flags.tolist() == [2] and flags.flagged()[1].tolist() == [2]
-    flags.observe(0, 0, entered=True)  # a collision: 1 in 1 entry
-    assert flags.flags.tolist() == [1]  # collision comes first
-    flags.observe(0, None, entered=True)
-    flags.observe(0, None, entered=True)  # 1 collision in 3 entries: the counted flag lifts
-    assert flags.flags.tolist() == [2]
-    flags.place_centre(0, None)  # an ordinary observation moved the centre
-    assert flags.flags.tolist() == [0] and flags.flagged()[0].size == 0
-
-
-def test_a4_rate_flags_per_entry_are_not_diluted_by_a_long_stay() -> None:
-    """Counted per entry, a crash after a long stay in one state flags it, and the flag lifts
-    only as streams keep coming into the state without failing; counted per recognition, the
-    stay itself dilutes the crash below the rate."""
-    flags = {}
-    for per in ("recognition", "entry"):
-        shield = shield_with(reviser=paper_reviser(flag_min_rate=0.1, flag_rate_per=per))  # type: ignore[arg-type]
-        for _ in range(20):
-            shield.step([1.0], 0.0)
-        shield.step([1.0], None, event="collision", done=True)
-        flags[per] = int(shield.flags.flags[0])
-    assert flags == {"recognition": 0, "entry": 1}  # 1 crash in 21 recognitions, 1 entry
+def test_a4_rate_flags_are_not_diluted_by_a_long_stay() -> None:
+    """A crash after a long stay in one state flags it (1 crash in 21 recognitions but 1
+    entry), and the flag lifts only as streams keep coming into the state without failing."""
+    shield = shield_with(reviser=paper_reviser(flag_min_rate=0.1))
+    for _ in range(20):
+        shield.step([1.0], 0.0)
+    shield.step([1.0], None, event="collision", done=True)
+    assert int(shield.flags.flags[0]) == 1
     assert shield.state_view(0)["visits"] == 21 and shield.state_view(0)["entries"] == 1
 
     for _ in range(9):  # in and out again: the stream's first step is an entry too
@@ -252,32 +180,6 @@ def test_one_sided_revisions_never_go_past_the_proposal_the_wrong_way(
     toward = np.sign(proposal)  # the wrong way: faster against a collision, slower behind
     assert (toward * (applied[False] - proposal) < 0).mean() > 0.3
     assert (applied[True] == proposal).all()
-
-
-@pytest.mark.parametrize("event", ["collision", "large_distance"])
-def test_noise_away_moves_a_revision_only_away_from_the_criterion(event: str) -> None:
-    """The same one-state trap, the proposal in the middle: Alg. 2 ends at the extreme bin
-    (midpoint 1.9 away from the criterion); the paper's noise moves the revision either way
-    around it, ``noise_side="away"`` folds the same draws (the same seed) away from the
-    criterion, where the action's bound cuts them at 0.1."""
-    applied = {}
-    for side in ("both", "away"):
-        shield = shield_with(reviser=paper_reviser(activate_after_episodes=0, one_sided=False,
-                                                   noise_side=side))  # type: ignore[arg-type]
-        for _ in range(4):
-            shield.step([1.0], None, event=event, done=True)
-        decisions = [shield.step([1.0], 0.0) for _ in range(200)]
-        assert all(d.revised for d in decisions)
-        applied[side] = np.array([d.action for d in decisions])
-    away = -1.0 if event == "collision" else 1.0
-    midpoint = 1.9 * away
-    both, folded = applied["both"], applied["away"]
-    assert ((both - midpoint) * away < -0.1).mean() > 0.3  # back towards the proposal
-    assert ((folded - midpoint) * away >= 0.0).all()
-    drawn = np.abs(both - midpoint) < 3.9 - 1e-9  # not cut by the bound on the far side
-    assert drawn.mean() > 0.9
-    assert np.allclose(np.abs(folded - midpoint)[drawn],
-                       np.minimum(np.abs(both - midpoint), 0.1)[drawn])
 
 
 def test_a8_the_transition_is_learned_under_the_executed_or_the_proposed_action() -> None:
