@@ -7,7 +7,7 @@
 #   2. bench/learner.py: a training step of 1, 5 and 10 learners, separate, batched on the
 #      CPU and batched as a CUDA graph; bench/rounding_drift.py: how far the CUDA ensemble
 #      drifts from separate runs;
-#   3. bench/layouts.sh: the paper's protocol (results/paper-protocol.sh) in each
+#   3. bench/layouts.sh: the paper's protocol (results/scripts/paper-protocol.sh) in each
 #      arrangement named in LAYOUTS, from episode 1 for SECONDS_EACH seconds each (default
 #      180), then stopped: how fast each arrangement trains on this machine, from the records
 #      (steps and wall_s of every episode).

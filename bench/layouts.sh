@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # How fast the paper's protocol trains in each arrangement named in LAYOUTS: each runs
-# results/paper-protocol.sh from episode 1 for SECONDS_EACH seconds (default 180), then stops;
+# results/scripts/paper-protocol.sh from episode 1 for SECONDS_EACH seconds (default 180), then stops;
 # bench/device_pace.py reads the pace from the records (steps and wall_s of every episode).
 # ROUNDS (default 1) repeats the whole list, so that a drift of the machine's speed falls on
 # every layout.
 #
 #   LAYOUTS="NAME:VARIABLES;..." bench/layouts.sh OUT
 #
-# A layout is "NAME:VARIABLES" with the variables of results/paper-protocol.sh, for example
+# A layout is "NAME:VARIABLES" with the variables of results/scripts/paper-protocol.sh, for example
 # "gpu-ws:LOCKSTEP=1 DEVICE=cuda GROUP=10 TRANSPORT=ws" or, for the shielded arm alone,
 # "b10:ARMS=ddpg+shield LOCKSTEP=1 GROUP=10 TRANSPORT=batch". Per layout OUT gets
 # NAME.tar.gz (NAME-rK.tar.gz with ROUNDS > 1): its records, its services' logs and the
@@ -27,7 +27,7 @@ for ((round = 1; round <= rounds; round++)); do
         work=$(mktemp -d)
         echo "== $name: ${layout#*:} for $seconds s"
         # shellcheck disable=SC2086  # the layout's variables are words
-        env ${layout#*:} timeout "$seconds" results/paper-protocol.sh "$work/$name" \
+        env ${layout#*:} timeout "$seconds" results/scripts/paper-protocol.sh "$work/$name" \
             >"$work/protocol.log" 2>&1
         echo "stopped after $seconds s (status $?)" >>"$work/protocol.log"
         mv "$work/protocol.log" "$work/$name/"

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Shield overrides tried against today's default on a tuning seed: NAME CONFIG runs
 # ddpg+shield with the overrides CONFIG (JSON), 4 runs x 600 episodes in one lockstep group
-# with in-process shields, as results/entry-rate.sh, whose rows (the default) are the
+# with in-process shields, as results/scripts/entry-rate.sh, whose rows (the default) are the
 # baseline; BASELINE=NAME compares with results/tuning/NAME's rows instead: knee-double (the
 # default until commit 2cac6a3, against which flags per entry, sticky flags, the horizon and
 # failure states on the knee were tried) or one-sided (until commit 7cf2170, against which
@@ -11,7 +11,7 @@
 # results/tuning/NAME/seed-$SEED and one table per seed, NAME-seed-$SEED.md (EPISODES=N: each
 # run's first N episodes).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 name=$1
 config=$2

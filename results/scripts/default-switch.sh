@@ -5,7 +5,7 @@
 # per arm, one lockstep group each, in-process shields, two arms at a time. Resumable: run it
 # again to go on with an interrupted arm. Records and the table in results/reduced/default-switch.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 out=results/reduced/default-switch
 preset() {

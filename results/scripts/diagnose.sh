@@ -4,7 +4,7 @@
 # default), each against the shield service over a WebSocket; then every state of the
 # learned model, from GET /models/{name}, into results/diagnosis/<flags>/states.md.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 port=${PORT:-8765}
 .venv/bin/python -m app serve --port "$port" --log-level warning &
@@ -16,7 +16,7 @@ for flags in sticky rate; do
     .venv/bin/python -m client run --arms ddpg+shield --runs 1 --episodes 150 --seed 0 \
         --shield "http://127.0.0.1:$port" --transport ws --out "$out" \
         --shield-config "{\"reviser\": {\"flags\": \"$flags\"}}" >/dev/null
-    .venv/bin/python results/states_table.py "http://127.0.0.1:$port/models/exp-ddpg-shield-0" \
+    .venv/bin/python results/scripts/states_table.py "http://127.0.0.1:$port/models/exp-ddpg-shield-0" \
         >"$out/states.md"
     cat "$out/table.md" "$out/states.md"
 done

@@ -6,7 +6,7 @@
 # prediction"). Flags per entry held the states of crashes and lifted those of ordinary
 # following on seeds 4 and 5, as sticky flags did not in the paper's protocol: the question is
 # whether they keep the horizon's gain without sticky flags' cost.
-# SEED=4 (default) or 5, STOP_AFTER, EPISODES: as results/against-default.sh says; writes
+# SEED=4 (default) or 5, STOP_AFTER, EPISODES: as results/scripts/against-default.sh says; writes
 # results/tuning/entry-horizon-2.
 BASELINE=entry-rate exec "$(dirname "$0")/against-default.sh" entry-horizon-2 \
     '{"reviser": {"flag_rate_per": "entry", "flag_min_rate": 0.05, "horizon": 2}}'

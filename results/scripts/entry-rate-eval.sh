@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
-# Flags per entry on the evaluation seeds, after tuning seeds 4 and 5 (results/entry-rate.sh,
-# results/entry-rate-low.sh): 4 runs x 300 episodes per row, base seed 1000, in-process
-# shields, one lockstep group per row, both rows at once. Read against results/reduced-4.sh's
+# Flags per entry on the evaluation seeds, after tuning seeds 4 and 5 (results/scripts/entry-rate.sh,
+# results/scripts/entry-rate-low.sh): 4 runs x 300 episodes per row, base seed 1000, in-process
+# shields, one lockstep group per row, both rows at once. Read against results/scripts/reduced-4.sh's
 # rows of DDPG alone and of the double knee (the default then; recorded on an earlier 2-core
 # machine, without lockstep). Rows: per entry at 0.05 (ddpg-shield-entry-rate) and at 0.03
 # (ddpg-shield-entry-rate-0.03). One table: results/reduced/four-runs/entry-rate.md.
 # Resumable: finished rows are read, not rerun.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 out=results/reduced/four-runs
 run() {  # run OUT RATE

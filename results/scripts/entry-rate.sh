@@ -6,8 +6,8 @@
 # (one run, 200 episodes) a state was entered once per 50-120 recognitions, and the states
 # of ordinary driving saw a crash in 0.6-4.5% of their entries, the state of the crashes in
 # 18%: 0.05 flags the latter, not the former. SEED=4 (default) or 5, STOP_AFTER, EPISODES:
-# as results/against-default.sh says; writes results/tuning/entry-rate.
+# as results/scripts/against-default.sh says; writes results/tuning/entry-rate.
 # Its overrides are the default since (results/README.md, change 6); the rows it compares
-# with are those of results/knee-double.sh, the default then.
+# with are those of results/scripts/knee-double.sh, the default then.
 BASELINE=knee-double exec "$(dirname "$0")/against-default.sh" entry-rate \
     '{"reviser": {"flag_rate_per": "entry", "flag_min_rate": 0.05}}'

@@ -1,17 +1,17 @@
 #!/usr/bin/env bash
 # Tuning of the clustering radius epsilon at today's 50 m headway scale (base seeds 0-2, never
 # the evaluation seeds), in-process shields, 2 runs x 250 episodes per row: epsilon 0.15
-# against 0.3 (the default then), whose rows are the 50 m rows of results/scale.sh. A smaller
+# against 0.3 (the default then), whose rows are the 50 m rows of results/scripts/scale.sh. A smaller
 # epsilon keeps more states; the traces had crashes decided inside busy states of ordinary
 # following. One table, results/tuning/epsilon/epsilon.md. Then, with 0.15 chosen from that
 # table, the same row on the evaluation seeds as a row of the reduced protocol
-# (results/reduced.sh: base seed 1000, 2 runs x 300 episodes), beside DDPG alone and the 50 m
+# (results/scripts/reduced.sh: base seed 1000, 2 runs x 300 episodes), beside DDPG alone and the 50 m
 # row there (after tuning seed 3 with 4 runs per value, added later), and the 0.3 row run
 # again on the machine of the 0.15 row (the 50 m row of
 # reduced.sh was recorded on an earlier machine that rounds differently; see results/README.md):
 # results/reduced/epsilon.md. Resumable: finished experiments are skipped.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 out=results/tuning/epsilon
 scale=results/tuning/scale

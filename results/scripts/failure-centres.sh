@@ -6,5 +6,5 @@
 # (crashes in 0.3-4.3% of the entries) that their counted flag lifted, while states of
 # ordinary following had rates as high (results/README.md, "Flags per entry at 0.05 in the
 # paper's protocol"). SEED=4 (default) or 5, STOP_AFTER, EPISODES: as
-# results/against-default.sh says; writes results/tuning/failure-centres.
+# results/scripts/against-default.sh says; writes results/tuning/failure-centres.
 exec "$(dirname "$0")/against-default.sh" failure-centres '{"reviser": {"failure_centres": true}}'

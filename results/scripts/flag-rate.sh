@@ -11,7 +11,7 @@
 # model at the end, <row>/states.md. Resumable. SEED=5 repeats it on another tuning seed, into
 # results/tuning/flag-rate-seed-5.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 seed=${SEED:-4}
 out=results/tuning/flag-rate
@@ -29,5 +29,5 @@ done
 for pid in "${pids[@]}"; do wait "$pid"; done
 .venv/bin/python -m client compare "$out"/{default,rate-0.0005,sticky} --out "$out/flag-rate.md"
 for row in "${rows[@]}"; do  # every model at the end (client run keeps them in <row>/models)
-    .venv/bin/python results/states_table.py "$out/${row%%;*}" >"$out/${row%%;*}/states.md"
+    .venv/bin/python results/scripts/states_table.py "$out/${row%%;*}" >"$out/${row%%;*}/states.md"
 done

@@ -11,7 +11,7 @@
 # then the default row's runs 0 and 1 again with their step traces (run 1 is the one where the
 # shield revised) and what `client trace` says of them (trace/trace.md). Resumable.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 out=results/tuning/idm-noise
 run() {  # NAME ARMS OVERRIDES [OPTIONS]

@@ -2,11 +2,11 @@
 # The inspection rule (A5) at the defaults then (50 m headway scale, epsilon 0.15) on the tuning
 # seeds 0-2, 2 runs x 250 episodes each, in-process shields: the literal first-by-index
 # reading, which did best on the reduced protocol at the 200 m scale but was never tuned,
-# against "any" (the default), whose rows are the epsilon 0.15 rows of results/epsilon.sh
+# against "any" (the default), whose rows are the epsilon 0.15 rows of results/scripts/epsilon.sh
 # (the same resolved configuration). One table: results/tuning/inspect/inspect.md.
 # Resumable: finished experiments are skipped.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 out=results/tuning/inspect
 for seed in 0 1 2; do

@@ -5,7 +5,7 @@
 # close following (centres 0-7 m behind the lead, tens of thousands of recognitions), whose
 # collision rate stays under the flag; a finer split of close following may give the seconds
 # before a crash states of their own. SEED=4 (default) or 5, STOP_AFTER, EPISODES: as
-# results/against-default.sh says; writes results/tuning/knee.
+# results/scripts/against-default.sh says; writes results/tuning/knee.
 # Recorded before knee_shape existed, with the log shape, and against the default of its time
 # (knee off): commit 7cf2170 regenerates the rows; later code refuses to extend them.
 BASELINE=one-sided exec "$(dirname "$0")/against-default.sh" knee \

@@ -7,6 +7,6 @@
 # in their last ten steps (results/README.md, "The revision noise under one-sided
 # revisions"). Taking the noise away (noise_k 1) was behind there; folding it keeps its
 # spread for DDPG's exploration and makes every revision brake at least as hard as Alg. 2's
-# bin. SEED=4 (default) or 5, STOP_AFTER, EPISODES: as results/against-default.sh says;
+# bin. SEED=4 (default) or 5, STOP_AFTER, EPISODES: as results/scripts/against-default.sh says;
 # writes results/tuning/noise-away.
 exec "$(dirname "$0")/against-default.sh" noise-away '{"reviser": {"noise_side": "away"}}'

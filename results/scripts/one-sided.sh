@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
 # One-sided revisions with DDPG (reviser.one_sided: a revision never accelerates more than the
 # proposal against a collision, never less against falling behind; tried first with the
-# aggressive IDM, results/idm-noise.sh). Tuning seeds (never the evaluation seeds), 4 runs x
-# 600 episodes in one lockstep group, in-process shields, as results/flag-rate.sh, whose
+# aggressive IDM, results/scripts/idm-noise.sh). Tuning seeds (never the evaluation seeds), 4 runs x
+# 600 episodes in one lockstep group, in-process shields, as results/scripts/flag-rate.sh, whose
 # default rows (tuning/flag-rate/default for seed 4, tuning/flag-rate-seed-5/default for
 # seed 5) are the baseline. SEED=4 (default) or 5; STOP_AFTER=M stops after M minutes (it
 # goes on from its checkpoint when run again). Writes results/tuning/one-sided/seed-$SEED and
 # one table per seed, one-sided-seed-$SEED.md (EPISODES=N: each run's first N episodes).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 seed=${SEED:-4}
 out=results/tuning/one-sided

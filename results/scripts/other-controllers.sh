@@ -3,12 +3,12 @@
 # 0.15, headway by 50 m, count-based flags): the IDM follower, an aggressive IDM and the random
 # controller, each with and without the shield; then the shielded arms again with one-sided
 # revisions (tried on tuning seed 4 after the default shield hurt the aggressive IDM:
-# results/idm-noise.sh). Evaluation seeds (base seed 1000), 4 runs x 300 episodes per arm,
+# results/scripts/idm-noise.sh). Evaluation seeds (base seed 1000), 4 runs x 300 episodes per arm,
 # in-process shields, CMAP training traces; tables in results/reduced/other-controllers-eps-0.15
 # and other-controllers-one-sided, both in other-controllers.md. (reduced/other-controllers is
 # the same question at the 200 m scale and epsilon 0.3, 2 runs an arm.) Resumable.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 out=results/reduced
 run() {  # NAME ARMS OVERRIDES

@@ -4,7 +4,7 @@
 # a shield service of its own over WebSocket (a sidecar per controller, in-memory models); all
 # 20 runs train in parallel processes, so it wants 16 cores or more.
 #
-#   results/paper-protocol.sh [OUT]          (default OUT: results/paper-protocol-default)
+#   results/scripts/paper-protocol.sh [OUT]          (default OUT: results/paper-protocol-default)
 #
 # results/paper-protocol holds the partial run made when the default normalised the headway by
 # 200 m; to continue that one, check out commit 1f428c5 and pass it as OUT. Likewise
@@ -51,7 +51,7 @@
 # one of 10. The shielded arm alone, too, stepped as fast in one group with one service as in
 # two groups of 5 or with SERVICES=2 (bench/layouts.sh, BENCHMARKS.md).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 out=${1:-results/paper-protocol-default}
 runs=${RUNS:-10}
 episodes=${EPISODES:-1500}

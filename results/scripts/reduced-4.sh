@@ -7,11 +7,11 @@
 # revisions off (ddpg-shield, recorded with `{}` while off was the default: commit c520107,
 # the last such, regenerates it; later code refuses to extend it); and one-sided revisions
 # (ddpg-shield-one-sided, the default then, asked for explicitly); and the double knee
-# (ddpg-shield-knee-double, tuned by results/knee-double.sh on seeds 4 and 5; recorded with
+# (ddpg-shield-knee-double, tuned by results/scripts/knee-double.sh on seeds 4 and 5; recorded with
 # flags per recognition, the default until commit 2cac6a3, which regenerates it). One table:
 # results/reduced/four-runs/four-runs.md. Resumable: finished experiments are skipped.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 out=results/reduced/four-runs
 run() {  # run OUT ARM [OVERRIDES]

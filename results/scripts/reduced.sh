@@ -3,7 +3,7 @@
 # seeds (base seed 1000), in-process shields, CMAP training traces; two experiments at a time.
 # Resumable: run it again to continue an interrupted experiment (finished ones are skipped).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 export out=results/reduced
 experiment() {  # "NAME;ARMS;SHIELD-OVERRIDES"

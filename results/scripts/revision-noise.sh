@@ -7,5 +7,5 @@
 # revision braked only 0.25 m/s^2 harder than DDPG asked (results/README.md, "The revision
 # noise under one-sided revisions"). K = 1: standard deviation 0.2 m/s^2 when the reviser
 # starts (episode 51), 0.06 at episode 600. SEED=4 (default) or 5, STOP_AFTER, EPISODES: as
-# results/against-default.sh says; writes results/tuning/revision-noise.
+# results/scripts/against-default.sh says; writes results/tuning/revision-noise.
 exec "$(dirname "$0")/against-default.sh" revision-noise '{"reviser": {"noise_k": 1.0}}'

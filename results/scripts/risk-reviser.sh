@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # The risk reviser (docs/risk-reviser.md) against the paper reviser with DDPG, 2 runs per row,
 # one lockstep group each, in-process shields.
-#   results/risk-reviser.sh          tuning seeds 4, 5 and 6, 200 episodes a run:
+#   results/scripts/risk-reviser.sh          tuning seeds 4, 5 and 6, 200 episodes a run:
 #                                    results/tuning/risk-reviser/seed-S/ROW, seed-S-activation.md
-#   EVAL=1 results/risk-reviser.sh   the evaluation seeds (base 1000), 300 episodes a run:
+#   EVAL=1 results/scripts/risk-reviser.sh   the evaluation seeds (base 1000), 300 episodes a run:
 #                                    results/reduced/risk-reviser/ROW, risk-reviser.md
 # The rows: the paper reviser as ShieldConfig.paper() has it (the default until commit
 # 5c3ff1b), the risk reviser activated after 50 episodes (today's default), the same from the
@@ -14,7 +14,7 @@
 # continuation: they regenerate at commit 1202fea with their folder's overrides (in each
 # record's header), risk-t0-m0.001 of seed 5 with '{"reviser":{"method":"risk"}}' there.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 rows=${ROWS:-'paper-default={"reviser":{"method":"paper","activate_after_episodes":50}}
 risk-default={"reviser":{"method":"risk","activate_after_episodes":50}}

@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Tuning of the headway scale (base seeds 0-2, never the evaluation seeds), in-process shields,
 # 2 runs x 250 episodes per row: the headway normalised by 100, 50 and 25 m on seed 0, by 200 m
-# and 50 m on seeds 1 and 2 where no 200 m row of results/tuning.sh exists, and 50 m with the
+# and 50 m on seeds 1 and 2 where no 200 m row of results/scripts/tuning.sh exists, and 50 m with the
 # revision noise almost gone (K = 1) on all three; and 50 m with sticky flags on all three,
 # after the trace of seed 1 showed count-based flags leaving a busy crash state unflagged. One table, results/tuning/scale/scale.md, beside the
-# 200 m rows and DDPG alone of results/tuning.sh. Resumable: finished experiments are skipped.
+# 200 m rows and DDPG alone of results/scripts/tuning.sh. Resumable: finished experiments are skipped.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 experiments() {  # OUT SEED, then lines "NAME;ARM;SHIELD-OVERRIDES" on stdin
     while IFS=';' read -r name arm overrides; do

@@ -2,8 +2,8 @@
 model counted them), failures by criterion and flag, and how many collisions were recognised
 in states that are not flagged now.
 
-    python results/states_table.py URL/models/NAME     a model on a shield service
-    python results/states_table.py OUT                 every model in OUT/models/
+    python results/scripts/states_table.py URL/models/NAME     a model on a shield service
+    python results/scripts/states_table.py OUT                 every model in OUT/models/
 
 OUT/models/ holds the model of each shielded run where it finished or stopped, gzipped, as
 `client run` keeps them.

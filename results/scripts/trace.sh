@@ -5,7 +5,7 @@
 #     200 m (the spec's scale, the default until this diagnosis) and by 50 m (the default since);
 #   seed-1-headway-50: both runs of seed 1 at 50 m, 250 episodes, where one run never revised.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 while IFS=';' read -r name seed runs episodes overrides; do
     out=results/diagnosis/trace-$name

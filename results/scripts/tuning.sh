@@ -10,10 +10,10 @@
 #      default and DDPG alone of part 2 (results/tuning/noise/noise.md)
 # These ran when the default normalised the headway by 200 m: commit 1f428c5 regenerates them
 # as they are (later code refuses their records as made under other defaults). The tuning of
-# the scale that replaced it is results/scale.sh.
+# the scale that replaced it is results/scripts/scale.sh.
 # Resumable: finished experiments are skipped.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/_venv.sh
 experiments() {  # OUT EPISODES [SEED], then lines "NAME;ARM;SHIELD-OVERRIDES" on stdin
     while IFS=';' read -r name arm overrides; do
