@@ -17,10 +17,10 @@ from typing import Annotated, NoReturn
 
 import httpx
 import typer
-from tqdm import tqdm
 
 from app.core import ShieldConfig, ShieldError
 from client.experiment import checkpoint, parallel, report, runner
+from client.experiment.progress import Progress
 from client.experiment.records import RecordError, read_all
 from client.experiment.trace import analyse as analyse_traces
 from client.shield import ShieldAPIError, ShieldClient, ShieldUnavailable
@@ -55,12 +55,11 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
                 with contextlib.closing(ShieldClient(url, token=token)) as probe:
                     probe.health()
         total = len(config.arms) * runs * episodes
-        with tqdm(total=total, desc="episodes", unit="ep", disable=None) as bar:
-            parallel.run_all(config, out, workers, token, bar, lockstep, trace, device,
-                           checkpoint_every, deadline)
+        with Progress(total, recorded(out, config.arms)) as progress:
+            parallel.run_all(config, out, workers, token, progress, lockstep, trace, device,
+                             checkpoint_every, deadline)
         if deadline is not None and parallel.past(deadline):
-            started = any((out / "records").glob("*.jsonl*"))
-            done = sum(r.arm in config.arms for r in read_all(out)[1]) if started else 0
+            done = recorded(out, config.arms)
             if done < total:
                 groups = len(checkpoint.pending(out))
                 saved = (f", {groups} group(s) checkpointed in {out / checkpoint.DIRECTORY}"
@@ -73,6 +72,13 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
     except (ValueError, RecordError, ShieldUnavailable, ShieldAPIError) as error:
         fail(str(error))
     return text
+
+
+def recorded(out: Path, arms: tuple[str, ...]) -> int:
+    """Episodes of ``arms`` already recorded in ``out``."""
+    if not any((out / "records").glob("*.jsonl*")):
+        return 0
+    return sum(r.arm in arms for r in read_all(out)[1])
 
 
 @cli.command()
@@ -238,9 +244,18 @@ def demo(
 ) -> None:
     """Start the shield service, train DDPG with and without it over the network, report."""
     out.mkdir(parents=True, exist_ok=True)
+    arms = "ddpg,ddpg+shield"
+    try:
+        done = recorded(out, tuple(arms.split(",")))
+    except RecordError as error:
+        fail(str(error))
+    if done:
+        typer.echo(f"{out} already holds {done} of {2 * runs * episodes} episodes: going on "
+                   f"from them (the records are reused, not retrained); to start afresh, "
+                   f"remove {out} or pass --out")
     with tempfile.TemporaryDirectory(dir=out) as tmp, service(Path(tmp) / "data") as url:
         typer.echo(f"shield service at {url}; {runs} runs x {episodes} episodes per arm")
-        text = experiment("ddpg,ddpg+shield", runs, episodes, seed, url, transport, out,
+        text = experiment(arms, runs, episodes, seed, url, transport, out,
                           workers, None, "train", lockstep=runs if lockstep else 0)
     typer.echo(text)
     typer.echo(f"\nfigure: {out / 'figure.png'}; records and summary.json in {out}")

@@ -8,7 +8,10 @@ if [ ! -x .venv/bin/python ]; then
     "$python" -m venv .venv
 fi
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+    echo "setting up .venv (once per change of pyproject.toml): this project with its service," \
+         "client and dev extras, torch 2.13.0 (CPU) among them; a few minutes the first time" >&2
     .venv/bin/python -m pip install --quiet --upgrade pip
-    .venv/bin/python -m pip install --quiet -e ".[service,client,dev]"
+    .venv/bin/python -m pip install --quiet --quiet -e ".[service,client,dev]"
     echo "$want" >"$stamp"
+    echo ".venv is ready" >&2
 fi
