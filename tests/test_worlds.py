@@ -26,3 +26,10 @@ def test_compare_is_deterministic() -> None:
     first = compare(world, [3], episodes=8, warmup=2)
     assert first == compare(world, [3], episodes=8, warmup=2)
     assert first["alone"] == sum(first["runs"][0]["alone"]["failures"].values())
+
+
+@pytest.mark.parametrize("name", ["SLUGGISH_WORLD", "COLLAPSED_WORLD"])
+def test_the_slow_failure_tuning_worlds_fall_behind_without_the_shield(name: str) -> None:
+    world = getattr(importlib.import_module("bench.worlds.tuning"), name)
+    alone = run(world, seed=0, episodes=6, warmup=0, config=None)
+    assert set(alone["failures"]) == {"large_distance"} and alone["total"] >= 3

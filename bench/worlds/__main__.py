@@ -20,7 +20,8 @@ from app.core import ShieldConfig
 from bench.worlds.harness import compare, summary_line
 
 WORLDS = ("braking_lead", "pendulum", "wall")
-TUNING = {"tuning_idm": "IDM_WORLD", "tuning_random": "RANDOM_WORLD"}
+TUNING = {"tuning_idm": "IDM_WORLD", "tuning_sluggish": "SLUGGISH_WORLD",
+          "tuning_collapsed": "COLLAPSED_WORLD", "tuning_random": "RANDOM_WORLD"}
 
 
 def merged(base: ShieldConfig, overrides: dict[str, dict[str, object]]) -> ShieldConfig:

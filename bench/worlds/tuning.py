@@ -1,8 +1,11 @@
-"""The tuning worlds: the project's own car-following simulator (``client/sim``) with its two
-non-learning controllers, the aggressive IDM and the random one. Defaults are chosen here (and
+"""The tuning worlds: the project's own car-following simulator (``client/sim``) with its
+non-learning controllers: the aggressive IDM (it collides), the sluggish one (it falls behind),
+the random one, and a collapsed one that always brakes fully, as a DDPG actor stuck at its
+bound does (the shield has to drive). Defaults are chosen here (and
 on the DDPG protocol's tuning seeds), never on the held-out worlds beside this module.
 
-``python -m bench.worlds --worlds tuning_idm,tuning_random --seeds 0,1``
+``python -m bench.worlds --seeds 0,1 \
+    --worlds tuning_idm,tuning_sluggish,tuning_collapsed,tuning_random``
 """
 
 from __future__ import annotations
@@ -27,4 +30,6 @@ def _world(name: str, controller: Any) -> World:
 
 
 IDM_WORLD = _world("tuning-idm-aggressive", lambda seed: PRESETS["aggressive"].act)
+SLUGGISH_WORLD = _world("tuning-idm-sluggish", lambda seed: PRESETS["sluggish"].act)
+COLLAPSED_WORLD = _world("tuning-collapsed", lambda seed: (lambda observation: -2.0))
 RANDOM_WORLD = _world("tuning-random", lambda seed: RandomController(seed).act)

@@ -36,6 +36,8 @@ PRESETS = {
     "normal": IDM(),
     # short headway and standstill gap, late braking: it crashes behind a hard-braking lead
     "aggressive": IDM(v0=32.0, time_headway=0.4, s0=0.5, a_max=2.0, b=4.0),
+    # wants to drive slower than the lead and speeds up gently: it falls more than 200 m behind
+    "sluggish": IDM(v0=22.0, a_max=0.8),
 }
 
 
