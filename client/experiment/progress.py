@@ -2,7 +2,7 @@
 
 A run of the paper's protocol takes hours and mostly runs with its output in a file, where a
 progress bar shows nothing until the end. Off a terminal, :class:`Progress` writes a line every
-``every_s`` seconds instead, with the rate and an estimate of the time left.
+``every_s`` seconds instead, with the recent rate and an estimate of the time left.
 """
 
 from __future__ import annotations
@@ -24,7 +24,8 @@ class Progress:
         self.stream = stream or sys.stderr
         self._bar = (tqdm(total=total, initial=done, desc="episodes", unit="ep",
                           file=self.stream) if self.stream.isatty() else None)
-        self._started = self._last = time.monotonic()
+        self._last = time.monotonic()
+        self._last_done = done
         self._first = done
 
     def update(self, n: int = 1) -> None:
@@ -36,9 +37,11 @@ class Progress:
             self._line()
 
     def line(self) -> str:
-        """Where the run stands: done of total, the rate since this start, the time left."""
-        elapsed = time.monotonic() - self._started
-        rate = (self.done - self._first) / elapsed * 60 if elapsed > 0 else 0.0
+        """Where the run stands: done of total, the rate since the previous line and the time
+        left at that rate (episodes grow longer as a controller learns to survive, so the rate
+        of the last minute says more than the rate since the start)."""
+        elapsed = time.monotonic() - self._last
+        rate = (self.done - self._last_done) / elapsed * 60 if elapsed > 0 else 0.0
         left = self.total - self.done
         if not left:
             eta = "done"
@@ -51,7 +54,7 @@ class Progress:
 
     def _line(self) -> None:
         print(self.line(), file=self.stream, flush=True)
-        self._last = time.monotonic()
+        self._last, self._last_done = time.monotonic(), self.done
 
     def __enter__(self) -> Progress:
         if self._bar is None and self._first:
