@@ -249,10 +249,12 @@ def demo(
         done = recorded(out, tuple(arms.split(",")))
     except RecordError as error:
         fail(str(error))
+    total = 2 * runs * episodes
     if done:
-        typer.echo(f"{out} already holds {done} of {2 * runs * episodes} episodes: going on "
-                   f"from them (the records are reused, not retrained); to start afresh, "
-                   f"remove {out} or pass --out")
+        what = ("reporting them without training" if done >= total
+                else "going on from them, not training them again")
+        typer.echo(f"{out} already holds {min(done, total)} of {total} episodes: {what}; to "
+                   f"start afresh, remove {out} or pass another --out")
     with tempfile.TemporaryDirectory(dir=out) as tmp, service(Path(tmp) / "data") as url:
         typer.echo(f"shield service at {url}; {runs} runs x {episodes} episodes per arm")
         text = experiment(arms, runs, episodes, seed, url, transport, out,

@@ -57,7 +57,7 @@ class Progress:
         self._last, self._last_done = time.monotonic(), self.done
 
     def __enter__(self) -> Progress:
-        if self._bar is None and self._first:
+        if self._bar is None and 0 < self._first < self.total:
             print(f"going on from {self._first:,} of {self.total:,} episodes already recorded",
                   file=self.stream, flush=True)
         return self

@@ -460,6 +460,11 @@ def test_the_demo_trains_both_arms_in_lockstep_against_its_own_service(tmp_path:
     assert all(h["learning"]["lockstep"] for h in headers)
     assert all(h["config"]["shield"].startswith("http://127.0.0.1:") for h in headers)
     assert not list(tmp_path.glob("tmp*"))  # the service's data went with the service
+    again = cli("demo", "--runs", "2", "--episodes", "2", "--out", str(tmp_path))
+    assert again.returncode == 0, again.stderr
+    assert (f"{tmp_path} already holds 8 of 8 episodes: reporting them without training; to "
+            f"start afresh, remove {tmp_path}") in again.stdout
+    assert "| ddpg+shield | 2 | 4 |" in again.stdout
 
 
 def test_the_command_stops_runs_outside_lockstep_at_its_deadline(tmp_path: Path) -> None:
