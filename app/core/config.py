@@ -2,8 +2,10 @@
 
 Every gap of the paper is a named switch (docs/algorithm.md lists them with the choice made);
 :meth:`ShieldConfig.paper_literal` sets all of them to the literal reading. Values are checked
-on construction and errors name the dotted field at fault. Stored configurations carry their
-format's ``version``; :meth:`ShieldConfig.from_stored` migrates older ones.
+on construction and errors name the dotted field at fault (checked here, not by pydantic, so
+that the core needs numpy alone; the service validates its requests with pydantic). Stored
+configurations carry their format's ``version``; :meth:`ShieldConfig.from_stored` migrates
+older ones.
 """
 
 from __future__ import annotations
