@@ -18,6 +18,8 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
     ("td3_car_following.py", ["--steps", "300"],
      r"alone: [\d.]+ failures per 1000 steps.*\n\s*shielded: [\d.]+ failures per 1000 steps"),
     ("vectorised.py", ["--steps", "200"], r"one model, \d+ open streams, \d+ steps"),
+    ("gymnasium_vector.py", ["--steps", "300", "--mode", "async"],
+     r"8 copies, one model: 2400 steps, \d+ states"),
     ("remote_service.py", ["--steps", "200"],
      r"model td3-car at http://127\.0\.0\.1:\d+: .*'streams': 0"),
 ])

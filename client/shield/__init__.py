@@ -1,6 +1,7 @@
 """Reach a shield from Python: in-process, over HTTP (sync or async, single or batch), or a
 WebSocket session; all answer ``revise(observation, action, **options) -> Decision``. Or put
-it in front of a Gymnasium environment: :class:`ShieldWrapper`."""
+it in front of a Gymnasium environment: :class:`ShieldWrapper`, or of a vectorised one with one
+model for every copy: :class:`ShieldVectorWrapper`."""
 
 from client.shield.base import StepShield
 from client.shield.local import LocalShield
@@ -13,6 +14,7 @@ from client.shield.remote import (
     ShieldUnavailable,
 )
 from client.shield.spaces import SpaceMismatch, check_config, config_for
+from client.shield.vector import ShieldVectorWrapper
 from client.shield.wrapper import ShieldWrapper
 
 __all__ = [
@@ -24,6 +26,7 @@ __all__ = [
     "ShieldClient",
     "ShieldSession",
     "ShieldUnavailable",
+    "ShieldVectorWrapper",
     "ShieldWrapper",
     "SpaceMismatch",
     "check_config",

@@ -18,6 +18,7 @@ import numpy as np
 from app.core import ActionSpec, Criterion, ObservationSpec, ShieldConfig
 
 DEFAULT_BINS = 20
+AnyEnv = gym.Env[Any, Any] | gym.vector.VectorEnv[Any, Any, Any]
 
 
 class SpaceMismatch(ValueError):
@@ -44,11 +45,31 @@ def one_dimensional(space: gym.Space[Any]) -> gym.spaces.Box:
     return space
 
 
-def config_for(env: gym.Env[Any, Any], criteria: Mapping[str, str] | None = None, *,
+def spaces(env: AnyEnv) -> tuple[gym.Space[Any], gym.Space[Any]]:
+    """The action and observation spaces of ``env``, or of each copy of a vectorised one."""
+    if isinstance(env, gym.vector.VectorEnv):
+        return env.single_action_space, env.single_observation_space
+    return env.action_space, env.observation_space
+
+
+def own_config(env: AnyEnv) -> ShieldConfig | None:
+    """The configuration an environment gives for its shield (a ``shield_config()`` method of
+    the unwrapped environment, or of the first copy of a ``SyncVectorEnv``), if it has one. The
+    copies of an ``AsyncVectorEnv`` live in other processes: pass their configuration."""
+    if isinstance(env, gym.vector.VectorEnv):
+        copies = getattr(env, "envs", None)
+        if not copies:
+            return None
+        env = copies[0]
+    own = getattr(env.unwrapped, "shield_config", None)
+    return own() if callable(own) else None
+
+
+def config_for(env: AnyEnv, criteria: Mapping[str, str] | None = None, *,
                bins: int = DEFAULT_BINS, low: Sequence[float] | None = None,
                high: Sequence[float] | None = None, base: ShieldConfig | None = None
                ) -> ShieldConfig:
-    """The shield configuration for ``env``.
+    """The shield configuration for ``env`` (or for each copy of a vectorised ``env``).
 
     An environment that knows its shield (a ``shield_config()`` method on the unwrapped
     environment, as ``CarFollowing-v0`` has) gives its own. Otherwise the observation's Box
@@ -57,15 +78,19 @@ def config_for(env: gym.Env[Any, Any], criteria: Mapping[str, str] | None = None
     of the action that moves away from it: ``{"crash": "decrease"}`` (slower is safer).
     Everything else is ``base`` (default: the shield's defaults).
     """
-    action = one_dimensional(env.action_space)
-    own = getattr(env.unwrapped, "shield_config", None)
-    if callable(own) and criteria is None and low is None and high is None:
-        config: ShieldConfig = own()
-        return config
+    action_space, space = spaces(env)
+    action = one_dimensional(action_space)
+    if criteria is None and low is None and high is None:
+        own = own_config(env)
+        if own is not None:
+            return own
+    if not criteria and isinstance(env, gym.vector.VectorEnv) and not getattr(env, "envs", None):
+        raise SpaceMismatch("the copies of this vectorised environment live in other "
+                            "processes, where their own shield configuration cannot be read: "
+                            "pass config= (their shield_config(), say) or criteria=", "config")
     if not criteria:
         raise SpaceMismatch("name the failures and the action's direction away from each, "
                             "e.g. criteria={'crash': 'decrease'}", "criteria")
-    space = env.observation_space
     if not isinstance(space, gym.spaces.Box):
         raise SpaceMismatch(f"the shield observes a Box, not {space}", "observation_space")
     size = int(np.prod(space.shape))
@@ -91,12 +116,14 @@ def config_for(env: gym.Env[Any, Any], criteria: Mapping[str, str] | None = None
     )
 
 
-def check_config(config: ShieldConfig, env: gym.Env[Any, Any],
+def check_config(config: ShieldConfig, env: AnyEnv,
                  observation_key: str = "efsm_observation") -> None:
     """Raise :class:`SpaceMismatch` where ``config`` cannot guard ``env``: actions the
     environment would not accept, or observations of another size (checked here when the
-    environment shows the shield its observation itself, at the first reset otherwise)."""
-    action = one_dimensional(env.action_space)
+    environment shows the shield its observation itself and lives in this process, at the
+    first reset otherwise)."""
+    action_space, space = spaces(env)
+    action = one_dimensional(action_space)
     a_low, a_high = float(action.low.reshape(-1)[0]), float(action.high.reshape(-1)[0])
     tolerance = 1e-6 * max(1.0, a_high - a_low)
     if config.action.low < a_low - tolerance:
@@ -105,9 +132,8 @@ def check_config(config: ShieldConfig, env: gym.Env[Any, Any],
     if config.action.high > a_high + tolerance:
         raise SpaceMismatch(f"{config.action.high} lies above the environment's {a_high}",
                             "action.high")
-    space = env.observation_space
-    if getattr(env.unwrapped, "shield_config", None) is None and isinstance(space,
-                                                                          gym.spaces.Box):
+    remote = isinstance(env, gym.vector.VectorEnv) and not getattr(env, "envs", None)
+    if not remote and own_config(env) is None and isinstance(space, gym.spaces.Box):
         check_observation(config, int(np.prod(space.shape)), observation_key)
 
 

@@ -41,7 +41,7 @@ Failure = Callable[[Any, float, bool, bool, dict[str, Any]], str | None]
 _copies = itertools.count()
 
 
-def _default_stream() -> str:
+def default_stream() -> str:
     """A name per wrapper, distinct across the copies of a vectorised environment, in one
     process or many."""
     return f"env-{os.getpid()}-{next(_copies)}"
@@ -80,7 +80,7 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
         self.failure = failure
         self.event_key = event_key
         self.observation_key = observation_key
-        self.stream = stream if stream is not None else _default_stream()
+        self.stream = stream if stream is not None else default_stream()
         self.warmup_steps = warmup_steps
         self.shadow = shadow
         self.evaluation = False
