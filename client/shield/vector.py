@@ -26,15 +26,8 @@ from gymnasium.vector import AutoresetMode
 
 from app.core import ShieldConfig
 from client.shield.base import StepShield
-from client.shield.local import LocalShield
-from client.shield.spaces import (
-    SpaceMismatch,
-    check_config,
-    check_observation,
-    config_for,
-    one_dimensional,
-)
-from client.shield.wrapper import Failure, default_stream
+from client.shield.spaces import SpaceMismatch, check_observation, one_dimensional
+from client.shield.wrapper import Failure, bind, default_stream, reseeded
 
 
 class ShieldVectorWrapper(gym.vector.VectorWrapper):
@@ -61,15 +54,9 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
             raise SpaceMismatch(f"the shield follows copies that reset themselves on the next "
                                 f"step (AutoresetMode.NEXT_STEP, Gymnasium's default), not "
                                 f"{AutoresetMode(mode)}", "autoreset_mode")
-        if warmup_steps < 0:
-            raise ValueError("warmup_steps must be >= 0")
-        if shield is None and config is None:
-            config = config_for(env, criteria)
-        if config is not None:
-            check_config(config, env, observation_key)
-        self.config = config
         self._owned = shield is None
-        self.shield: StepShield = shield if shield is not None else LocalShield(config)
+        self.config, self.shield = bind(env, shield, config, criteria, observation_key,
+                                        warmup_steps)
         self.failure = failure
         self.event_key = event_key
         self.observation_key = observation_key
@@ -98,10 +85,7 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
         if seed is not None and self._owned and not self._seeded and self.steps == 0:
             self._seeded = True
             self.shield.close()
-            base = self.config or ShieldConfig()
-            reviser = {**base.to_dict()["reviser"], "seed": seed % 2**63}
-            self.config = ShieldConfig.from_dict({**base.to_dict(), "reviser": reviser})
-            self.shield = LocalShield(self.config)
+            self.config, self.shield = reseeded(self.config, seed)
         observations, infos = self.env.reset(seed=seed, options=options)
         self._z = [self._observe(observations, infos, i) for i in range(self.num_envs)]
         if self.config is not None:

@@ -35,10 +35,38 @@ import numpy as np
 from app.core import ShieldConfig
 from client.shield.base import StepShield
 from client.shield.local import LocalShield
-from client.shield.spaces import check_config, check_observation, config_for, one_dimensional
+from client.shield.spaces import (
+    AnyEnv,
+    check_config,
+    check_observation,
+    config_for,
+    one_dimensional,
+)
 
 Failure = Callable[[Any, float, bool, bool, dict[str, Any]], str | None]
 _copies = itertools.count()
+
+
+def bind(env: AnyEnv, shield: StepShield | None, config: ShieldConfig | None,
+         criteria: Mapping[str, str] | None, observation_key: str,
+         warmup_steps: int) -> tuple[ShieldConfig | None, StepShield]:
+    """The configuration (derived from ``env`` and ``criteria`` unless given, and checked
+    against ``env``) and the shield a wrapper uses: ``shield``, or a :class:`LocalShield` of
+    its own."""
+    if warmup_steps < 0:
+        raise ValueError("warmup_steps must be >= 0")
+    if shield is None and config is None:
+        config = config_for(env, criteria)
+    if config is not None:
+        check_config(config, env, observation_key)
+    return config, shield if shield is not None else LocalShield(config)
+
+
+def reseeded(config: ShieldConfig | None, seed: int) -> tuple[ShieldConfig, LocalShield]:
+    """``config`` with the reviser's seed from a ``reset(seed=...)``, and a fresh shield."""
+    base = (config or ShieldConfig()).to_dict()
+    config = ShieldConfig.from_dict({**base, "reviser": {**base["reviser"], "seed": seed % 2**63}})
+    return config, LocalShield(config)
 
 
 def default_stream() -> str:
@@ -68,15 +96,9 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
                  warmup_steps: int = 0, shadow: bool = False) -> None:
         super().__init__(env)
         one_dimensional(env.action_space)
-        if warmup_steps < 0:
-            raise ValueError("warmup_steps must be >= 0")
-        if shield is None and config is None:
-            config = config_for(env, criteria)
-        if config is not None:
-            check_config(config, env, observation_key)
-        self.config = config
         self._owned = shield is None
-        self.shield: StepShield = shield if shield is not None else LocalShield(config)
+        self.config, self.shield = bind(env, shield, config, criteria, observation_key,
+                                        warmup_steps)
         self.failure = failure
         self.event_key = event_key
         self.observation_key = observation_key
@@ -101,10 +123,7 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
         if seed is not None and self._owned and not self._seeded and self.steps == 0:
             self._seeded = True
             self.shield.close()
-            base = self.config or ShieldConfig()
-            reviser = {**base.to_dict()["reviser"], "seed": seed % 2**63}
-            self.config = ShieldConfig.from_dict({**base.to_dict(), "reviser": reviser})
-            self.shield = LocalShield(self.config)
+            self.config, self.shield = reseeded(self.config, seed)
         observation, info = self.env.reset(seed=seed, options=options)
         self._z = self._observe(observation, info)
         if self.config is not None:
