@@ -56,7 +56,16 @@ def set_value(*path: str, value: Any) -> Callable[[dict[str, Any]], None]:
     return change
 
 
+def removed_switch(snapshot: dict[str, Any]) -> None:
+    """A configuration of the stored format's version 1 that used a switch removed since."""
+    config = snapshot["exact"]["config"]
+    del config["version"]
+    config["observation"]["knee_shape"] = "double"  # the knee of version 1's last default
+    config["reviser"]["noise_side"] = "away"
+
+
 BROKEN = {
+    "a switch removed since": (removed_switch, "config.reviser.noise_side"),
     "a belief's state out of range": (
         set_first("streams", "open", "index", value=999_999), "streams.open.index"),
     "an applied bin out of range": (
