@@ -24,6 +24,7 @@ from client.experiment.progress import Progress
 from client.experiment.records import RecordError, read_all
 from client.experiment.trace import analyse as analyse_traces
 from client.shield import ShieldAPIError, ShieldClient, ShieldUnavailable
+from client.sim.car_following import RewardConfig
 
 CHECKPOINT_MINUTES = 10.0  # how often lockstep groups save their state by default
 cli = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -39,7 +40,8 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
                out: Path, workers: int, token: str | None, lead: str,
                shield_config: str = "{}", lockstep: int = 0, trace: bool = False,
                device: str = "cpu", checkpoint_every: float | None = None,
-               deadline: float | None = None, update_first: bool = False) -> str:
+               deadline: float | None = None, update_first: bool = False,
+               reward: str = "{}") -> str:
     """Run, then report (or, stopped at ``deadline``, say how to go on); every failure a user
     can cause becomes one line."""
     try:
@@ -49,7 +51,11 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
             arms=tuple(a.strip() for a in arms.split(",") if a.strip()), runs=runs,
             episodes=episodes, seed=seed, shield=shield, transport=transport,  # type: ignore[arg-type]
             lead=lead, shield_config=overrides,  # type: ignore[arg-type]
-            ddpg={"update_first": True} if update_first else {})
+            ddpg={"update_first": True} if update_first else {}, reward=json.loads(reward))
+        try:
+            RewardConfig(**config.reward)  # refuse an unknown reward constant before any run
+        except TypeError as error:
+            fail(f"reward: {error}")
         if shield != "local":
             for url in config.shield_urls:
                 with contextlib.closing(ShieldClient(url, token=token)) as probe:
@@ -124,6 +130,9 @@ def run(
         help="DDPG updates before each step instead of after it, so that it learns while a "
              "shield service answers: faster over the network, the same records over every "
              "transport, not those of the usual order.")] = False,
+    reward: Annotated[str, typer.Option(
+        help='Reward constants as JSON, e.g. \'{"failure_penalty": 60}\' (the paper\'s '
+             'Eqs. 10-12 and none by default).')] = "{}",
 ) -> None:
     """Run arms x runs x episodes (resumable: run it again to continue), then report."""
     if not lockstep and (lockstep_runs is not None or device != "cpu"
@@ -144,7 +153,7 @@ def run(
     deadline = None if stop_after is None else time.time() + 60.0 * stop_after
     typer.echo(experiment(arms, runs, episodes, seed, shield, transport, out, workers, token,
                           lead, shield_config, group, trace, device, every, deadline,
-                          update_first))
+                          update_first, reward))
     if (out / "table.md").exists() and not checkpoint.pending(out):
         typer.echo(f"\nrecords, summary.json, table.md and figure.png in {out}")
 

@@ -34,6 +34,10 @@ class RewardConfig:
     d_safe: float = 10.0  # [m]
     accel_max: float = 2.0  # [m/s^2]
     form: Literal["as_written", "time_headway"] = "as_written"
+    # subtracted from the reward of a step that ends in a failure; the paper gives none, and
+    # with every term of Eqs. 10-12 <= 0 an episode ended early is then the best a learner
+    # with terminal value 0 can reach
+    failure_penalty: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -143,6 +147,8 @@ class CarFollowingEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]])
         elif self._headway > LARGE_DISTANCE:
             event = "large_distance"
         terminated = event is not None
+        if terminated:
+            reward -= self.reward_config.failure_penalty
         truncated = not terminated and self._t >= MAX_STEPS
         return self._observation(), reward, terminated, truncated, self._info(event)
 

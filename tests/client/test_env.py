@@ -80,3 +80,20 @@ def test_reward_is_zero_at_the_ideal_point() -> None:
     env._v_ego, env._v_lead, env._headway, env._a_prev = 10.0, 10.0, 20.0, 0.5
     assert env._reward(0.5) == pytest.approx(0.0)
     assert env._reward(-1.5) < 0.0
+
+
+def test_a_failure_penalty_lowers_the_reward_of_the_failing_step_only() -> None:
+    rewards = {}
+    for penalty in (0.0, 60.0):
+        env = CarFollowingEnv(lead=lead.synthetic(2), start=StartConfig(headway=(20.0, 20.0)),
+                              reward=RewardConfig(failure_penalty=penalty))
+        env.reset(seed=0)
+        rewards[penalty] = []
+        while True:
+            _, reward, terminated, _, info = env.step(np.array([2.0], np.float32))
+            rewards[penalty].append(reward)
+            if terminated:
+                break
+        assert info["event"] == "collision"
+    assert rewards[60.0][:-1] == rewards[0.0][:-1]
+    assert rewards[60.0][-1] == pytest.approx(rewards[0.0][-1] - 60.0)

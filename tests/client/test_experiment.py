@@ -406,6 +406,7 @@ def cli(*args: str) -> subprocess.CompletedProcess[str]:
     (("report", "{tmp}/nothing"), "no record files"),
     (("run", "--shield-config", '{"reviser": {"inspect": "every"}}'),
      "shield configuration: reviser.inspect"),
+    (("run", "--reward", '{"penalty": 60}'), "reward: "),
 ])
 def test_user_errors_are_one_clear_line(tmp_path: Path, args: tuple[str, ...],
                                         message: str) -> None:
