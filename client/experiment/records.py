@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from app.core import ShieldConfig, ShieldError
+from client.sim.car_following import RewardConfig
 
 
 @dataclass(frozen=True)
@@ -82,9 +83,9 @@ def start(path: Path, header: dict[str, Any], episodes: int) -> list[EpisodeReco
     episodes it already holds.
 
     An existing file must carry the same ``identity`` (the configuration less where the
-    shield runs and how it is reached, which change no result) and, where both headers have
-    it, the same resolved shield configuration (the overrides alone do not show a change of
-    the defaults), else :class:`RecordError`. A run kept gzipped is read where it is when it
+    shield runs and how it is reached, which change no result), the same resolved reward
+    constants and, where both headers have it, the same resolved shield configuration (the
+    overrides alone do not show a change of the defaults), else :class:`RecordError`. A run kept gzipped is read where it is when it
     is finished, and unpacked to go on plain when it is not.
     """
     packed = path.with_name(path.name + ".gz")
@@ -107,6 +108,9 @@ def start(path: Path, header: dict[str, Any], episodes: int) -> list[EpisodeReco
     if before is not None and now is not None and not same_shield(before, now):
         raise RecordError(f"{source}: written with another shield configuration (the defaults "
                           f"have changed since); remove it or use another --out")
+    if "reward" in header and resolved_reward(existing_header) != header["reward"]:
+        raise RecordError(f"{source}: written with other reward constants (the defaults have "
+                          f"changed since); remove it or use another --out")
     if source is packed and len(records) < episodes:
         with open(path, "wb") as f:
             f.write(gzip.decompress(packed.read_bytes()))
@@ -114,6 +118,16 @@ def start(path: Path, header: dict[str, Any], episodes: int) -> list[EpisodeReco
             os.fsync(f.fileno())
         packed.unlink()
     return records
+
+
+def resolved_reward(header: dict[str, Any]) -> dict[str, Any]:
+    """The reward constants a run used: its header's, or for a header written before headers
+    carried them, its overrides over the defaults of its time (the failure penalty did not
+    exist then: 0)."""
+    if "reward" in header:
+        resolved: dict[str, Any] = header["reward"]
+        return resolved
+    return asdict(RewardConfig(**{"failure_penalty": 0.0, **header["config"].get("reward", {})}))
 
 
 def same_shield(before: dict[str, Any], now: dict[str, Any]) -> bool:

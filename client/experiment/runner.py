@@ -17,7 +17,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import IO, Any, Literal, Protocol, TypeVar
 
@@ -316,6 +316,7 @@ class Run:
         header = {"config": config.to_dict(), "identity": identity, "arm": arm, "run": index,
                   "seed": seed, "versions": versions(),
                   "shield": shield_config(config, seed).to_dict() if mode else None,
+                  "reward": asdict(RewardConfig(**config.reward)),
                   "learning": learning or {"lockstep": False, "device": "cpu"}}
         claim = records.claim(path)
         try:  # a refused file or an unreachable shield releases the run's file at once

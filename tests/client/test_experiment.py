@@ -22,6 +22,7 @@ from app.service import codec
 from client.agents.ddpg import DDPG, DDPGConfig
 from client.experiment import records, report, runner, trace
 from client.experiment.records import EpisodeRecord
+from client.sim.car_following import RewardConfig
 from tests.conftest import free_port
 
 CONFIG = runner.ExperimentConfig(arms=("idm-aggressive", "idm-aggressive+shield"), runs=1,
@@ -94,6 +95,24 @@ def test_records_from_before_a_switch_existed_keep_the_value_it_was_added_with(
     header["header"]["identity"] = CONFIG.identity()  # as if run without the override
     path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
     with pytest.raises(records.RecordError, match="another shield configuration"):
+        runner.run_one(CONFIG, arm, 0, tmp_path)
+
+
+def test_records_carry_their_reward_constants_and_refuse_others(tmp_path: Path) -> None:
+    """A header names the resolved reward; one written before headers did resumes as the
+    defaults of its time (no failure penalty), one with other constants is refused."""
+    arm = "idm-aggressive"
+    runner.run_one(CONFIG, arm, 0, tmp_path)
+    path = records.path_for(tmp_path, arm, 0)
+    lines = path.read_text().splitlines(keepends=True)
+    header = json.loads(lines[0])
+    assert header["header"]["reward"]["failure_penalty"] == 0.0
+    del header["header"]["reward"]  # written before headers carried it
+    path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
+    assert runner.run_one(CONFIG, arm, 0, tmp_path) == 0  # the same constants: nothing to do
+    header["header"]["reward"] = {**dataclasses.asdict(RewardConfig()), "failure_penalty": 5.0}
+    path.write_text(json.dumps(header) + "\n" + "".join(lines[1:]))
+    with pytest.raises(records.RecordError, match="other reward constants"):
         runner.run_one(CONFIG, arm, 0, tmp_path)
 
 
