@@ -85,8 +85,9 @@ def start(path: Path, header: dict[str, Any], episodes: int) -> list[EpisodeReco
     An existing file must carry the same ``identity`` (the configuration less where the
     shield runs and how it is reached, which change no result), the same resolved reward
     constants and, where both headers have it, the same resolved shield configuration (the
-    overrides alone do not show a change of the defaults), else :class:`RecordError`. A run kept gzipped is read where it is when it
-    is finished, and unpacked to go on plain when it is not.
+    overrides alone do not show a change of the defaults), else :class:`RecordError`. A run
+    kept gzipped is read where it is when it is finished, and unpacked to go on plain when it
+    is not.
     """
     packed = path.with_name(path.name + ".gz")
     empty = not path.exists() or path.stat().st_size == 0
