@@ -154,16 +154,19 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
 
     def _observe(self, observations: Any, infos: dict[str, Any], i: int) -> list[float]:
         key = self.observation_key
-        shown = key in infos and bool(infos.get(f"_{key}", np.ones(self.num_envs, bool))[i])
-        z = infos[key][i] if shown else observations[i]
+        z = infos[key][i] if key in infos and _present(infos, key, i) else observations[i]
         return [float(v) for v in np.asarray(z, dtype=np.float64).reshape(-1)]
 
 
 def _one(infos: dict[str, Any], i: int) -> dict[str, Any]:
     """Copy ``i``'s info from a vectorised one (its keys where their ``_key`` mask holds)."""
     return {key: _one(value, i) if isinstance(value, dict) else value[i]
-            for key, value in infos.items()
-            if not key.startswith("_") and (f"_{key}" not in infos or infos[f"_{key}"][i])}
+            for key, value in infos.items() if not key.startswith("_") and _present(infos, key, i)}
+
+
+def _present(infos: dict[str, Any], key: str, i: int) -> bool:
+    """Whether ``infos[key]`` holds a value for copy ``i`` (its ``_key`` mask, where given)."""
+    return f"_{key}" not in infos or bool(infos[f"_{key}"][i])
 
 
 def _masked(key: str, values: list[dict[str, Any] | None]) -> dict[str, Any]:
