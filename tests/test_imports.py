@@ -19,7 +19,7 @@ def top(modules: set[str]) -> set[str]:
     return {name.split(".")[0] for name in modules}
 
 
-def test_core_needs_numpy_alone() -> None:
+def test_core_needs_numpy_and_numba_alone() -> None:
     loaded = imported_after("app.core")
     assert not top(loaded) & {"fastapi", "pydantic", "httpx", "torch", "starlette", "client"}
     assert not {m for m in loaded if m.startswith(("app.service", "app.api"))}

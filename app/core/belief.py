@@ -13,6 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
+
+from app.core._kernels import numpy_sum
 
 FloatArray = npt.NDArray[np.float64]
 IndexArray = npt.NDArray[np.int64]
@@ -65,16 +68,48 @@ NEGLIGIBLE_LOGIT = math.log(np.finfo(np.float64).eps)
 
 
 def recognise(sq_distances: FloatArray, variances: FloatArray, k: int) -> Belief:
-    """Eq. 1 as a numerically stable softmax of ``-d_i^2 / var_i``, truncated to the top k."""
-    logits = -sq_distances / variances
-    if logits.shape[0] > k:
-        index = np.flatnonzero(logits >= logits.max() + NEGLIGIBLE_LOGIT)
-        if index.size > k:
-            index = np.sort(index[np.argpartition(-logits[index], k - 1)[:k]])
-    else:
-        index = np.arange(logits.shape[0])
-    chosen = logits[index]
-    weights = np.exp(chosen - chosen.max())
-    keep = weights > 0.0
-    weights = weights[keep]
-    return Belief(index[keep].astype(np.int64, copy=False), weights / weights.sum())
+    """Eq. 1 as a numerically stable softmax of ``-d_i^2 / var_i``, truncated to the top k
+    (ties to the lower index)."""
+    size = min(sq_distances.shape[0], k)
+    index = np.empty(size, dtype=np.int64)
+    prob = np.empty(size)
+    m = _recognise(sq_distances, variances, k, index, prob)
+    return Belief(index[:m], prob[:m])
+
+
+@njit(cache=True)
+def _recognise(sq_distances: FloatArray, variances: FloatArray, k: int, index: IndexArray,
+               prob: FloatArray) -> int:
+    """Fill ``index`` (ascending) and ``prob`` with the belief; return its size."""
+    n = sq_distances.shape[0]
+    top = -math.inf
+    for i in range(n):
+        top = max(top, -sq_distances[i] / variances[i])
+    # the k largest logits within NEGLIGIBLE_LOGIT of the top, kept sorted by (logit desc,
+    # index asc) in index/prob as scratch
+    m = 0
+    for i in range(n):
+        logit = -sq_distances[i] / variances[i]
+        if n > k and logit < top + NEGLIGIBLE_LOGIT:
+            continue
+        if m == k and logit <= prob[m - 1]:
+            continue
+        j = m if m < k else k - 1
+        while j > 0 and prob[j - 1] < logit:
+            prob[j], index[j] = prob[j - 1], index[j - 1]
+            j -= 1
+        prob[j], index[j] = logit, i
+        m = min(m + 1, k)
+    index[:m].sort()
+    for j in range(m):
+        prob[j] = -sq_distances[index[j]] / variances[index[j]]
+    kept = 0
+    for j in range(m):
+        weight = math.exp(prob[j] - top)
+        if weight > 0.0:
+            index[kept], prob[kept] = index[j], weight
+            kept += 1
+    total = numpy_sum(prob, kept)
+    for j in range(kept):
+        prob[j] /= total
+    return kept

@@ -13,6 +13,7 @@ from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from app.core import _stored as stored
 from app.core._arrays import ensure_capacity
@@ -99,108 +100,40 @@ class EvolvingClusterer:
         view.flags.writeable = False
         return view
 
-    def _refresh_variance(self, i: int) -> None:
-        cfg = self.config
-        if cfg.spread == "radius":  # r_i^2 with a floor
-            var = self._radii[i] ** 2
-        elif cfg.spread == "member_variance":  # mean squared member distance, floored
-            var = self._scatter[i] / self._support[i]
-        else:  # eTS-2004 membership exp(-4 d^2 / r^2): var = r^2 / 4
-            var = cfg.epsilon**2 / 4.0
-        self._variances[i] = max(var, cfg.min_variance)
-
-    def sq_distances(self, z: FloatArray, sq_norm: float | None = None) -> FloatArray:
-        """Squared distances from z to every centre: ||c||^2 - 2 c.z + ||z||^2, clipped at 0.
-
-        ``sq_norm`` is ||z||^2 where the caller has it already.
-        """
-        n = self._n
-        if sq_norm is None:
-            sq_norm = float(z @ z)
-        d2 = self._sq_norms[:n] - 2.0 * (self._centres[:n] @ z) + sq_norm
-        return np.maximum(d2, 0.0, out=d2)
+    def sq_distances(self, z: FloatArray) -> FloatArray:
+        """Squared distances from z to every centre: ||c||^2 - 2 c.z + ||z||^2, clipped at 0."""
+        out = np.empty(self._n)
+        _sq_distances(self._centres, self._sq_norms, self._n, z, _dot(z, z), out)
+        return out
 
     def learn_one(self, z: FloatArray) -> StateUpdate:
         """Cluster one normalised observation; may create or move one state."""
         cfg = self.config
+        n = self._n
+        if n == self._centres.shape[0]:
+            self._reserve(n + 1)
         self.k += 1
-        k = self.k
-        theta = float(z @ z)
-        if self._n == 0:  # first sample: centre 1 with potential 1
-            index = self._add(z, potential=1.0)
-            self._accumulate(z, theta)
-            return StateUpdate("new", index, np.zeros(1))
+        d2 = np.empty(n + 1)
+        kind, index, self.sigma, hit = _learn(
+            z, self.k, self.beta, self.sigma, self._centres, self._sq_norms, self._potentials,
+            self._radii, self._support, self._scatter, self._variances, n, self.max_states,
+            cfg.epsilon, cfg.rho, cfg.creation_rule == "ets_plus", _SPREADS[cfg.spread],
+            cfg.min_variance, d2)
+        self.capacity_hits += hit
+        if kind == NEW:
+            self._n = n + 1
+            return StateUpdate("new", index, d2)
+        return StateUpdate(_KINDS[kind], index, d2[:n])
 
-        n = self._n
-        d2 = self.sq_distances(z, theta)
-        # P_k(z_k) = (k-1) / ((k-1)(theta+1) + sigma - 2 nu)
-        nu = float(z @ self.beta)
-        p_new = (k - 1) / ((k - 1) * (theta + 1.0) + self.sigma - 2.0 * nu)
-        # P_k(c_i) = (k-1) P_{k-1}(c_i) / (k-2 + P_{k-1}(c_i) (1 + d_i^2))
-        pot = self._potentials[:n]
-        pot[:] = (k - 1) * pot / (k - 2 + pot * (1.0 + d2))
-        nearest = int(d2.argmin())
-        delta = math.sqrt(d2[nearest])
-        p_max = float(pot.max())
-
-        if cfg.creation_rule == "ets_plus":  # eTS+: novel if above all or below all
-            candidate = p_new > p_max or p_new < float(pot.min())
-            replace = delta < cfg.epsilon
-        else:  # eTS-2004: only dense points; replace when P/Pmax - delta/r >= 1
-            candidate = p_new > p_max
-            replace = p_new / p_max - delta / cfg.epsilon >= 1.0
-
-        if candidate and replace:
-            self._centres[nearest] = z
-            self._sq_norms[nearest] = theta
-            self._potentials[nearest] = p_new
-            d2 = self.sq_distances(z, theta)
-            update = StateUpdate("replaced", nearest, d2)
-        elif candidate and n < self.max_states:
-            index = self._add(z, potential=p_new)
-            update = StateUpdate("new", index, np.append(d2, 0.0))
-        else:
-            if candidate:
-                self.capacity_hits += 1
-            self._assign(nearest, float(d2[nearest]))
-            update = StateUpdate("assigned", nearest, d2)
-        self._accumulate(z, theta)
-        return update
-
-    def _add(self, z: FloatArray, potential: float) -> int:
-        n = self._n
+    def _reserve(self, needed: int) -> None:
         limit = self.max_states
-        self._centres = ensure_capacity(self._centres, n + 1, limit)
-        self._sq_norms = ensure_capacity(self._sq_norms, n + 1, limit)
-        self._potentials = ensure_capacity(self._potentials, n + 1, limit)
-        self._radii = ensure_capacity(self._radii, n + 1, limit)
-        self._support = ensure_capacity(self._support, n + 1, limit)
-        self._scatter = ensure_capacity(self._scatter, n + 1, limit)
-        self._variances = ensure_capacity(self._variances, n + 1, limit)
-        self._centres[n] = z
-        self._sq_norms[n] = float(z @ z)
-        self._potentials[n] = potential
-        self._radii[n] = self.config.epsilon  # initial spread = epsilon
-        self._support[n] = 1
-        self._scatter[n] = 0.0
-        self._n = n + 1
-        self._refresh_variance(n)
-        return n
-
-    def _assign(self, index: int, sq_distance: float) -> None:
-        # scatter_i += ||z - c_i||^2; r_i = rho r_i + (1 - rho) sqrt(scatter_i / N_i)
-        rho = self.config.rho
-        support = int(self._support[index]) + 1
-        scatter = float(self._scatter[index]) + sq_distance
-        self._support[index] = support
-        self._scatter[index] = scatter
-        local = math.sqrt(scatter / support)
-        self._radii[index] = rho * float(self._radii[index]) + (1.0 - rho) * local
-        self._refresh_variance(index)
-
-    def _accumulate(self, z: FloatArray, sq_norm: float) -> None:
-        self.beta += z
-        self.sigma += sq_norm
+        self._centres = ensure_capacity(self._centres, needed, limit)
+        self._sq_norms = ensure_capacity(self._sq_norms, needed, limit)
+        self._potentials = ensure_capacity(self._potentials, needed, limit)
+        self._radii = ensure_capacity(self._radii, needed, limit)
+        self._support = ensure_capacity(self._support, needed, limit)
+        self._scatter = ensure_capacity(self._scatter, needed, limit)
+        self._variances = ensure_capacity(self._variances, needed, limit)
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state as plain data and arrays."""
@@ -240,7 +173,122 @@ class EvolvingClusterer:
         self._radii = stored.floats(data["radii"], "clustering.radii", (n,), low=0.0)
         self._support = stored.ints(data["support"], "clustering.support", (n,), low=1)
         self._scatter = stored.floats(data["scatter"], "clustering.scatter", (n,), low=0.0)
-        self._variances = np.zeros(self._n)
-        for i in range(self._n):
-            self._refresh_variance(i)
+        self._variances = np.zeros(n)
+        spread = _SPREADS[config.spread]
+        for i in range(n):
+            _refresh_variance(self._variances, self._radii, self._support, self._scatter, i,
+                              spread, config.epsilon, config.min_variance)
         return self
+
+
+NEW, REPLACED, ASSIGNED = 0, 1, 2
+_KINDS: dict[int, Literal["new", "replaced", "assigned"]] = {
+    NEW: "new", REPLACED: "replaced", ASSIGNED: "assigned"}
+_SPREADS = {"radius": 0, "member_variance": 1, "ets2004": 2}
+
+
+@njit(cache=True)
+def _dot(x: FloatArray, y: FloatArray) -> float:
+    total = 0.0
+    for i in range(x.shape[0]):
+        total += x[i] * y[i]
+    return total
+
+
+@njit(cache=True)
+def _sq_distances(centres: FloatArray, sq_norms: FloatArray, n: int, z: FloatArray,
+                  theta: float, out: FloatArray) -> None:
+    for i in range(n):
+        d2 = sq_norms[i] - 2.0 * _dot(centres[i], z) + theta
+        out[i] = d2 if d2 > 0.0 else 0.0
+
+
+@njit(cache=True)
+def _refresh_variance(variances: FloatArray, radii: FloatArray, support: npt.NDArray[np.int64],
+                      scatter: FloatArray, i: int, spread: int, epsilon: float,
+                      min_variance: float) -> None:
+    """var(s^i) of Eq. 1: r_i^2 (radius), the mean squared member distance
+    (member_variance) or eTS-2004's r^2 / 4 for membership exp(-4 d^2 / r^2), floored."""
+    if spread == 0:
+        var = radii[i] ** 2
+    elif spread == 1:
+        var = scatter[i] / support[i]
+    else:
+        var = epsilon**2 / 4.0
+    variances[i] = max(var, min_variance)
+
+
+@njit(cache=True)
+def _learn(z: FloatArray, k: int, beta: FloatArray, sigma: float, centres: FloatArray,
+           sq_norms: FloatArray, potentials: FloatArray, radii: FloatArray,
+           support: npt.NDArray[np.int64], scatter: FloatArray, variances: FloatArray,
+           n: int, max_states: int, epsilon: float, rho: float, ets_plus: bool, spread: int,
+           min_variance: float, d2: FloatArray
+           ) -> tuple[int, int, float, int]:
+    """One eTS / eTS+ step on the arrays (capacity for n + 1 states): the update's kind,
+    the state it touched, the new sigma and whether a candidate met the state limit. ``d2``
+    gets the squared distances to every centre after the update."""
+    theta = _dot(z, z)
+    index, kind, hit = 0, NEW, 0
+    if n == 0:  # first sample: centre 1 with potential 1
+        _add(z, theta, 1.0, centres, sq_norms, potentials, radii, support, scatter, variances,
+             0, epsilon, spread, min_variance)
+        d2[0] = 0.0
+    else:
+        _sq_distances(centres, sq_norms, n, z, theta, d2)
+        # P_k(z_k) = (k-1) / ((k-1)(theta+1) + sigma - 2 nu)
+        nu = _dot(z, beta)
+        p_new = (k - 1) / ((k - 1) * (theta + 1.0) + sigma - 2.0 * nu)
+        # P_k(c_i) = (k-1) P_{k-1}(c_i) / (k-2 + P_{k-1}(c_i) (1 + d_i^2))
+        nearest, p_max, p_min = 0, -math.inf, math.inf
+        for i in range(n):
+            pot = (k - 1) * potentials[i] / (k - 2 + potentials[i] * (1.0 + d2[i]))
+            potentials[i] = pot
+            p_max, p_min = max(p_max, pot), min(p_min, pot)
+            if d2[i] < d2[nearest]:
+                nearest = i
+        delta = math.sqrt(d2[nearest])
+        if ets_plus:  # eTS+: novel if above all or below all
+            candidate = p_new > p_max or p_new < p_min
+            replace = delta < epsilon
+        else:  # eTS-2004: only dense points; replace when P/Pmax - delta/r >= 1
+            candidate = p_new > p_max
+            replace = p_new / p_max - delta / epsilon >= 1.0
+        if candidate and replace:
+            centres[nearest] = z
+            sq_norms[nearest] = theta
+            potentials[nearest] = p_new
+            _sq_distances(centres, sq_norms, n, z, theta, d2)
+            index, kind = nearest, REPLACED
+        elif candidate and n < max_states:
+            _add(z, theta, p_new, centres, sq_norms, potentials, radii, support, scatter,
+                 variances, n, epsilon, spread, min_variance)
+            d2[n] = 0.0
+            index = n
+        else:
+            hit = 1 if candidate else 0
+            # scatter_i += ||z - c_i||^2; r_i = rho r_i + (1 - rho) sqrt(scatter_i / N_i)
+            support[nearest] += 1
+            scatter[nearest] += d2[nearest]
+            local = math.sqrt(scatter[nearest] / support[nearest])
+            radii[nearest] = rho * radii[nearest] + (1.0 - rho) * local
+            _refresh_variance(variances, radii, support, scatter, nearest, spread, epsilon,
+                              min_variance)
+            index, kind = nearest, ASSIGNED
+    for i in range(beta.shape[0]):
+        beta[i] += z[i]
+    return kind, index, sigma + theta, hit
+
+
+@njit(cache=True)
+def _add(z: FloatArray, theta: float, potential: float, centres: FloatArray,
+         sq_norms: FloatArray, potentials: FloatArray, radii: FloatArray,
+         support: npt.NDArray[np.int64], scatter: FloatArray, variances: FloatArray, n: int,
+         epsilon: float, spread: int, min_variance: float) -> None:
+    centres[n] = z
+    sq_norms[n] = theta
+    potentials[n] = potential
+    radii[n] = epsilon  # initial spread = epsilon
+    support[n] = 1
+    scatter[n] = 0.0
+    _refresh_variance(variances, radii, support, scatter, n, spread, epsilon, min_variance)

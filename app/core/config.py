@@ -3,8 +3,8 @@
 Every gap of the paper is a named switch (docs/algorithm.md lists them with the choice made);
 :meth:`ShieldConfig.paper_literal` sets all of them to the literal reading. Values are checked
 on construction and errors name the dotted field at fault (checked here, not by pydantic, so
-that the core needs numpy alone; the service validates its requests with pydantic). Stored
-configurations carry their format's ``version``; :meth:`ShieldConfig.from_stored` migrates
+that the core needs numpy and numba alone; the service validates its requests with pydantic).
+Stored configurations carry their format's ``version``; :meth:`ShieldConfig.from_stored` migrates
 older ones.
 """
 
@@ -466,7 +466,7 @@ def _convert(hint: Any, value: Any, path: str) -> Any:
         if not isinstance(value, str):
             raise InvalidConfig("expected a string", field=path)
         return value
-    raise InvalidConfig("unsupported field", field=path)  # pragma: no cover
+    raise InvalidConfig("unsupported field", field=path)
 
 
 def _join(path: str, name: str) -> str:

@@ -23,9 +23,11 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from app.core import _stored as stored
 from app.core._arrays import ensure_capacity
+from app.core._kernels import NEG_INF, logaddexp, numpy_sum
 from app.core.belief import Belief
 from app.core.config import TransitionConfig
 from app.core.errors import InvalidSnapshot
@@ -62,7 +64,7 @@ class LazyTransitions:
         self._cols: list[ColArray] = [np.zeros((0, 0), dtype=np.int32) for _ in range(q)]
         self._vals: list[FloatArray] = [np.zeros((0, 0)) for _ in range(q)]
         self._log_prior = math.log(config.prior)
-        self._scratch = np.zeros((0, 0), dtype=np.int64)  # see _find_slots
+        self._scratch = np.zeros(0, dtype=np.int64)  # see _learn
 
     @property
     def n_states(self) -> int:
@@ -123,67 +125,21 @@ class LazyTransitions:
         ``F <- (1 - phi) F + phi tau gamma^T`` becomes ``D <- (1 - phi) D`` and
         ``S += phi tau gamma^T / D``; touched rows are first re-based to the new scale.
         """
-        a, lr = action_bin, self.config.learning_rate
-        log_decay = self._log_decay[a] + math.log1p(-lr)
-        self._log_decay[a] = log_decay
-        offset, row_sum, nnz_a = self._offset[a], self._row_sum[a], self._nnz[a]
-        rows, tau = prev.index, prev.prob
-        cols, gamma = belief.index, belief.prob
-        factor = np.exp(offset[rows] + log_decay)  # <= 1
-        base = -log_decay  # the touched rows' new offset
-        offset[rows] = base
-        learned = row_sum[rows] * factor + lr * tau * gamma.sum()
-        row_sum[rows] = learned
-        contrib = lr * tau[:, None] * gamma[None, :]
-        # _refresh_scales for these rows, through the action's own rows: indexing with
-        # [a][rows] costs a fraction of [a, rows]
-        self._learned_scale[a][rows], self._pad_scale[a][rows] = _scales(
-            self._log_pad[a][rows], self._log_level[a][rows], base, learned)
-
-        nnz = nnz_a[rows]
-        width = self._vals[a].shape[1]
-        if width:
-            vals = self._vals[a]
-            vals[rows] *= factor[:, None]
-            slot = self._find_slots(a, rows, nnz, cols)
-            missing = slot < 0
-            if not missing.any():  # the common case once the model has settled
-                vals[rows[:, None], slot] += contrib
+        a = action_bin
+        if self._scratch.shape[0] < self._n:
+            self._scratch = np.zeros(self.max_states, dtype=np.int64)
+        while True:
+            needed = _learn(a, self.config.learning_rate, prev.index, prev.prob, belief.index,
+                            belief.prob, self._log_decay, self._offset[a], self._row_sum[a],
+                            self._nnz[a], self._log_pad[a], self._log_level[a],
+                            self._learned_scale[a], self._pad_scale[a], self._cols[a],
+                            self._vals[a], self._scratch)
+            if not needed:
                 return
-            fr, fc = (~missing).nonzero()
-            vals[rows[fr], slot[fr, fc]] += contrib[fr, fc]
-        else:
-            missing = np.ones((rows.size, cols.size), dtype=bool)
-
-        added = missing.sum(axis=1)
-        needed = int((nnz + added).max(initial=0))
-        if needed > width:
-            new_width = max(needed, width + width // 4, 8)  # rows widen slowly: grow by 25%
+            width = self._vals[a].shape[1]  # rows widen slowly: grow by 25%
+            new_width = max(needed, width + width // 4, 8)
             self._cols[a] = ensure_capacity(self._cols[a], new_width, new_width, axis=1)
             self._vals[a] = ensure_capacity(self._vals[a], new_width, new_width, axis=1)
-        mr, mc = missing.nonzero()
-        slot_new = nnz[mr] + (missing.cumsum(axis=1) - 1)[mr, mc]
-        self._cols[a][rows[mr], slot_new] = cols[mc]
-        self._vals[a][rows[mr], slot_new] = contrib[mr, mc]
-        nnz_a[rows] = nnz + added
-
-    def _find_slots(self, a: int, rows: IntArray, nnz: IntArray, cols: IntArray) -> IntArray:
-        """Slot of each (row, col) pair in the learned rows, -1 where absent.
-
-        A sparse accumulator: a scratch map column -> slot + 1 is filled for the touched rows
-        only and cleared again, so the lookup costs O(k W + k^2) whatever n is.
-        """
-        scratch = self._scratch
-        if scratch.shape[0] < rows.size or scratch.shape[1] < self._n:
-            scratch = ensure_capacity(scratch, rows.size, rows.size)
-            scratch = self._scratch = ensure_capacity(scratch, self._n, self.max_states, axis=1)
-        stored_cols = self._cols[a]
-        r, s = (np.arange(stored_cols.shape[1]) < nnz[:, None]).nonzero()
-        stored = stored_cols[rows[r], s]
-        scratch[r, stored] = s + 1
-        slot = scratch[: rows.size][:, cols] - 1
-        scratch[r, stored] = 0
-        return slot
 
     def predict(self, belief: Belief, action_bin: int, transpose: bool) -> FloatArray:
         """Eq. 5: ``P^T p`` when ``transpose`` (A1), else the literal ``P p``."""
@@ -413,3 +369,64 @@ def _suffix_sums(x: FloatArray) -> FloatArray:
     out = np.zeros((*x.shape[:-1], x.shape[-1] + 1))
     x[..., ::-1].cumsum(axis=-1, out=out[..., -2::-1])
     return out
+
+
+@njit(cache=True)
+def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
+           gamma: FloatArray, log_decay: FloatArray, offset: FloatArray, row_sum: FloatArray,
+           nnz: IntArray, log_pad: FloatArray, log_level: FloatArray,
+           learned_scale: FloatArray, pad_scale: FloatArray, stored_cols: ColArray,
+           vals: FloatArray, slots: IntArray) -> int:
+    """:meth:`LazyTransitions.learn_one` on action ``a``'s arrays. Returns 0 when done, or,
+    changing nothing, the row width it needs when a row has no room for its new entries.
+
+    ``slots`` is a zeroed scratch map column -> slot + 1, filled for one row at a time and
+    cleared again, so that finding the entries costs O(k W) whatever n is.
+    """
+    width = vals.shape[1]
+    needed = 0
+    for i in range(rows.shape[0]):  # first, without changing anything: is there room?
+        row = rows[i]
+        count = nnz[row]
+        for s in range(count):
+            slots[stored_cols[row, s]] = s + 1
+        for j in range(cols.shape[0]):
+            if slots[cols[j]] == 0:
+                count += 1
+        for s in range(nnz[row]):
+            slots[stored_cols[row, s]] = 0
+        needed = max(needed, count)
+    if needed > width:
+        return needed
+    step = log_decay[a] + math.log1p(-lr)
+    log_decay[a] = step
+    base = -step  # the touched rows' new offset
+    gamma_sum = numpy_sum(gamma, gamma.shape[0])
+    for i in range(rows.shape[0]):
+        row = rows[i]
+        factor = math.exp(offset[row] + step)  # <= 1
+        offset[row] = base
+        learned = row_sum[row] * factor + lr * tau[i] * gamma_sum
+        row_sum[row] = learned
+        log_learned = math.log(learned) if learned > 0.0 else NEG_INF
+        log_norm = logaddexp(log_pad[row], base + log_learned)
+        learned_scale[row] = math.exp(base - log_norm)
+        pad_scale[row] = math.exp(log_level[row] - log_norm)
+        count = nnz[row]
+        for s in range(width):
+            vals[row, s] *= factor
+        for s in range(count):
+            slots[stored_cols[row, s]] = s + 1
+        for j in range(cols.shape[0]):
+            contrib = lr * tau[i] * gamma[j]
+            slot = slots[cols[j]] - 1
+            if slot >= 0:
+                vals[row, slot] += contrib
+            else:
+                stored_cols[row, count] = cols[j]
+                vals[row, count] = contrib
+                count += 1
+        for s in range(nnz[row]):
+            slots[stored_cols[row, s]] = 0
+        nnz[row] = count
+    return 0

@@ -28,15 +28,16 @@ The table ``Q`` (states x actions x criteria) is refreshed at episode ends and e
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from app.core import _stored as stored
 from app.core._arrays import ensure_capacity
-from app.core.belief import Belief
 from app.core.errors import InvalidSnapshot
 
 FloatArray = npt.NDArray[np.float64]
@@ -160,23 +161,6 @@ class OutcomeCounts:
         return self
 
 
-def monotone(q_table: FloatArray, directions: Sequence[str]) -> FloatArray:
-    """The running maximum of each criterion's risk from its safe end of the action range.
-
-    ``decrease`` (collision: slower is safer): ``Q(s, a) >= Q(s, a')`` for every ``a' < a``;
-    ``increase`` (falling behind: faster is safer): for every ``a' > a``. An action never
-    tried in a state (risk 0 of its own) so takes the risk of the riskiest tried action on its
-    safe side, the nearest one included.
-    """
-    out = np.empty_like(q_table)
-    for c, direction in enumerate(directions):
-        if direction == "decrease":
-            np.maximum.accumulate(q_table[:, :, c], axis=1, out=out[:, :, c])
-        else:
-            out[:, ::-1, c] = np.maximum.accumulate(q_table[:, ::-1, c], axis=1)
-    return out
-
-
 def horizon_risk(
     tries: IntArray,
     failures: IntArray,
@@ -195,52 +179,145 @@ def horizon_risk(
     >>> horizon_risk(tries, failures, moves, ["decrease"], 1, 1.0)[0, :, 0].tolist()
     [0.0, 0.5]
     """
-    n, q, n_c = failures.shape
     rows, cols, counts = moves
-    denominator = tries + prior_safe
-    p_fail = failures / denominator[:, :, None]  # posterior mean of each failure
-    p_move = counts / denominator.ravel()[rows]
-    tried = tries > 0
-    q_table = monotone(p_fail, directions)
-    for _ in range(horizon - 1):
-        # V(s) = Q(s, a*) for the action of least total risk, tried or not (an untried one at
-        # its monotone lower bound: the shield may choose it); 0 where nothing was tried
-        best = q_table.sum(axis=2).argmin(axis=1)
-        value = q_table[np.arange(n), best]
-        value[~tried.any(axis=1)] = 0.0
-        ahead = np.empty((n * q, n_c))
-        for c in range(n_c):
-            ahead[:, c] = np.bincount(rows, weights=p_move * value[cols, c], minlength=n * q)
-        q_table = monotone(p_fail + ahead.reshape(n, q, n_c), directions)
-    return q_table
-
-
-def belief_risk(q_table: FloatArray, belief: Belief) -> FloatArray:
-    """Risk of every action under a belief, actions x criteria: ``sum_i belief_i Q(i)``."""
-    out: FloatArray = np.tensordot(belief.prob, q_table[belief.index], axes=1)
+    out = np.empty(failures.shape)
+    _horizon_risk(np.ascontiguousarray(tries, dtype=np.int64),
+                  np.ascontiguousarray(failures, dtype=np.int64),
+                  np.ascontiguousarray(rows, dtype=np.int64),
+                  np.ascontiguousarray(cols, dtype=np.int64),
+                  np.ascontiguousarray(counts, dtype=np.int64),
+                  safe_steps(directions), horizon, prior_safe, out)
     return out
 
 
-def kept_limit(total: FloatArray, threshold: float, margin: float) -> float:
+def safe_steps(directions: Sequence[str]) -> IntArray:
+    """Per criterion, the way along the action bins that never raises its risk: -1 where
+    slower is safer (``decrease``), +1 where faster is (``increase``)."""
+    return np.array([-1 if d == "decrease" else 1 for d in directions], dtype=np.int64)
+
+
+@njit(cache=True)
+def monotone(q_table: FloatArray, safe: IntArray, out: FloatArray
+             ) -> None:
+    """``out``: the running maximum of each criterion's risk from its safe end of the action
+    range (``safe`` from :func:`safe_steps`).
+
+    Slower is safer (collision): ``Q(s, a) >= Q(s, a')`` for every ``a' < a``; faster is
+    safer (falling behind): for every ``a' > a``. An action never tried in a state (risk 0
+    of its own) so takes the risk of the riskiest tried action on its safe side, the nearest
+    one included.
+    """
+    n, q, n_c = q_table.shape
+    for s in range(n):
+        for c in range(n_c):
+            first, last, way = (0, q, 1) if safe[c] < 0 else (q - 1, -1, -1)
+            running = q_table[s, first, c]
+            for a in range(first, last, way):
+                value = q_table[s, a, c]
+                running = value if value > running else running
+                out[s, a, c] = running
+
+
+@njit(cache=True)
+def _horizon_risk(tries: IntArray, failures: IntArray, rows: IntArray, cols: IntArray,
+                  counts: IntArray, safe: IntArray, horizon: int, prior_safe: float,
+                  out: FloatArray) -> None:
+    """:func:`horizon_risk` into ``out``: value iteration on the counts.
+
+    ``Q_h(s, a) = p(s, a) + sum_j P(j | s, a) V_{h-1}(j)``, V the risk of the action of least
+    total risk (tried or not: an untried one at its monotone lower bound, which the shield
+    may choose), 0 where nothing was tried; the moves are summed in the order counted.
+    """
+    n, q, n_c = failures.shape
+    p_fail = np.empty((n, q, n_c))  # posterior mean of each failure
+    tried = np.zeros(n, dtype=np.bool_)
+    for s in range(n):
+        for a in range(q):
+            denominator = tries[s, a] + prior_safe
+            tried[s] |= tries[s, a] > 0
+            for c in range(n_c):
+                p_fail[s, a, c] = failures[s, a, c] / denominator
+    p_move = np.empty(rows.shape[0])
+    for m in range(rows.shape[0]):
+        p_move[m] = counts[m] / (tries[rows[m] // q, rows[m] % q] + prior_safe)
+    monotone(p_fail, safe, out)
+    value = np.zeros((n, n_c))
+    ahead = np.empty((n * q, n_c))
+    work = np.empty((n, q, n_c))
+    for _ in range(horizon - 1):
+        for s in range(n):
+            best, least = 0, math.inf
+            for a in range(q):
+                total = out[s, a, 0]
+                for c in range(1, n_c):
+                    total += out[s, a, c]
+                if total < least:
+                    best, least = a, total
+            for c in range(n_c):
+                value[s, c] = out[s, best, c] if tried[s] else 0.0
+        ahead[:] = 0.0
+        for m in range(rows.shape[0]):
+            for c in range(n_c):
+                ahead[rows[m], c] += p_move[m] * value[cols[m], c]
+        for s in range(n):
+            for a in range(q):
+                for c in range(n_c):
+                    work[s, a, c] = p_fail[s, a, c] + ahead[s * q + a, c]
+        monotone(work, safe, out)
+
+
+@njit(cache=True)
+def kept_limit(total: FloatArray, threshold: float, margin: float
+               ) -> float:
     """The largest total risk an action may carry and be applied: ``threshold``, or ``margin``
     above the safest action's risk, whichever is higher."""
-    return max(threshold, float(total.min()) + margin)
+    least: float = total.min()
+    return max(threshold, least + margin)
 
 
-def choose(total: FloatArray, proposed_bin: int, limit: float, safe_step: int) -> int:
+@njit(cache=True)
+def choose(total: FloatArray, proposed_bin: int, limit: float, safe_step: int
+           ) -> int:
     """The bin to apply: the proposal when its total risk is within ``limit``
     (:func:`kept_limit`); otherwise the allowed bin nearest to it, ties broken towards
-    ``safe_step`` (-1: slower, +1: faster).
-
-    >>> total = np.array([0.0, 0.01, 0.3, 0.6])
-    >>> choose(total, 3, kept_limit(total, 0.05, 0.02), -1)
-    1
-    """
+    ``safe_step`` (-1: slower, +1: faster)."""
     if total[proposed_bin] <= limit:
         return proposed_bin
-    allowed = np.flatnonzero(total <= limit)
-    distance = np.abs(allowed - proposed_bin) * 2 - (np.sign(allowed - proposed_bin) == safe_step)
-    return int(allowed[int(distance.argmin())])
+    best, best_distance = -1, 0
+    for a in range(total.shape[0]):
+        if total[a] <= limit:
+            offset = a - proposed_bin
+            distance = abs(offset) * 2 - (1 if (offset > 0) - (offset < 0) == safe_step else 0)
+            if best < 0 or distance < best_distance:
+                best, best_distance = a, distance
+    return best
+
+
+@njit(cache=True)
+def decide(table: FloatArray, index: IntArray, prob: FloatArray, proposed_bin: int,
+           threshold: float, margin: float, safe: IntArray, by_bin: FloatArray
+           ) -> tuple[float, int, int]:
+    """One step of the risk reviser on the table: ``by_bin`` (actions x criteria) gets the
+    risk under the belief, ``sum_i belief_i Q(i, a)``; returns the limit (:func:`kept_limit`),
+    the proposal's riskiest criterion and the bin to apply (:func:`choose`, towards that
+    criterion's safe side)."""
+    q, n_c = by_bin.shape
+    total = np.empty(q)
+    for a in range(q):
+        for c in range(n_c):
+            risk = 0.0
+            for i in range(index.shape[0]):
+                risk += prob[i] * table[index[i], a, c]
+            by_bin[a, c] = risk
+        total[a] = by_bin[a, 0]
+        for c in range(1, n_c):
+            total[a] += by_bin[a, c]
+    limit = kept_limit(total, threshold, margin)
+    worst = 0
+    for c in range(1, n_c):
+        if by_bin[proposed_bin, c] > by_bin[proposed_bin, worst]:
+            worst = c
+    return limit, worst, choose(total, proposed_bin, limit, safe[worst])
 
 
 def _read_only(view: npt.NDArray[Any]) -> npt.NDArray[Any]:

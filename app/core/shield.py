@@ -159,6 +159,7 @@ class Shield:
         self._low = self._warp(low)
         self._range: FloatArray = high - low
         self._directions = [c.direction for c in cfg.criteria]
+        self._safe_steps = risk.safe_steps(self._directions)
         # the paper's a_max bounds a range symmetric about 0: the half-width, so that the
         # revision noise follows the width of any range, not where it lies
         self._a_max = (cfg.action.high - cfg.action.low) / 2
@@ -554,16 +555,17 @@ class Shield:
             return Decision(action=proposed, revised=False, reason="cold_start", verdict="ok",
                             risk=self._risk(None), threshold=None, candidates=(),
                             suggested=proposed, **common)
-        by_bin = risk.belief_risk(self._risk_table[: self.n_states], belief)
-        total = by_bin.sum(axis=1)
         start = actions.encode(proposed, cfg.action)
-        limit = risk.kept_limit(total, cfg.risk.threshold, cfg.risk.margin)
+        by_bin = np.empty((cfg.action.n_bins, len(cfg.criteria)))
+        limit, worst, final = risk.decide(
+            self._risk_table, belief.index, belief.prob, start, cfg.risk.threshold,
+            cfg.risk.margin, self._safe_steps, by_bin)
+        total = by_bin.sum(axis=1)
         names = [c.name for c in cfg.criteria]
 
         def named(r: int) -> dict[str, float]:
             return {name: float(v) for name, v in zip(names, by_bin[r], strict=True)}
 
-        worst = int(by_bin[start].argmax())
         active = self.counters.episodes >= cfg.reviser.activate_after_episodes
         if total[start] <= limit or not active:
             reason = "pass" if active else "inactive"
@@ -571,8 +573,6 @@ class Shield:
             return Decision(action=proposed, revised=False, reason=reason, verdict=verdict,
                             risk=named(start), threshold=limit, candidates=(),
                             suggested=proposed, **common)
-        safe_step = -1 if self._directions[worst] == "decrease" else 1
-        final = risk.choose(total, start, limit, safe_step)
         way = 1 if final > start else -1
         candidates = tuple(
             Candidate(actions.decode(r, cfg.action), r,

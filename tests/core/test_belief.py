@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from app.core.belief import recognise, top_k
+from tests.core import reference
 
 
 def test_eq1_on_a_hand_computed_case() -> None:
@@ -46,3 +47,16 @@ def test_top_k_renormalises_and_drops_zeros() -> None:
     b = top_k(np.array([0.0, 0.2, 0.6, 0.2]), 3)
     assert b.index.tolist() == [1, 2, 3]
     assert b.prob == pytest.approx([0.2, 0.6, 0.2])
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_the_compiled_recognition_gives_the_numpy_reading(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 60))
+    d2 = rng.uniform(0, 2, n) * rng.choice([1e-3, 1.0, 100.0])
+    var = rng.uniform(1e-4, 0.1, n)
+    for k in (1, 4, 16):
+        belief = recognise(d2, var, k)
+        index, prob = reference.recognise(d2, var, k)
+        np.testing.assert_array_equal(belief.index, index)
+        np.testing.assert_array_equal(belief.prob, prob)

@@ -1,10 +1,13 @@
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
 from app.core.clustering import EvolvingClusterer
 from app.core.config import ClusteringConfig
+from tests.core import reference
 
 
 def direct_potential(z: np.ndarray, samples: list[np.ndarray]) -> float:
@@ -79,3 +82,20 @@ def test_far_observations_create_states_and_states_are_never_removed() -> None:
         counts.append(c.n_states)
     assert counts == sorted(counts)
     assert counts[-1] > 3
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_clustering_gives_the_numpy_reading(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    config = ClusteringConfig(epsilon=0.15)
+    clusterer = EvolvingClusterer(config, 3, max_states=12)
+    state: dict[str, Any] = {"centres": np.zeros((0, 3)), "beta": np.zeros(3), "sigma": 0.0,
+                             "k": 0}
+    z = rng.uniform(0, 1, 3)
+    for _ in range(3000):
+        z = np.clip(z + rng.normal(0, 0.08, 3), 0, 1)
+        kind = clusterer.learn_one(z).kind
+        assert kind == reference.cluster(state, z, config.epsilon, config.rho, 12)
+    np.testing.assert_allclose(clusterer.centres, state["centres"], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(clusterer.potentials, state["potentials"], rtol=1e-12)
+    np.testing.assert_allclose(clusterer.radii, state["radii"], rtol=1e-12)

@@ -6,7 +6,16 @@ import numpy as np
 import pytest
 
 from app.core import InvalidConfig, InvalidSnapshot, Shield, ShieldConfig
-from app.core.risk import OutcomeCounts, choose, horizon_risk, kept_limit, monotone
+from app.core.risk import (
+    OutcomeCounts,
+    choose,
+    decide,
+    horizon_risk,
+    kept_limit,
+    monotone,
+    safe_steps,
+)
+from tests.core import reference
 
 COLLISION = ["decrease"]
 
@@ -66,7 +75,8 @@ def test_the_safest_continuation_is_taken_after_the_first_step() -> None:
 
 def test_monotone_prior_runs_from_each_criterion_safe_end() -> None:
     raw = np.array([[[0.0, 0.3], [0.2, 0.0], [0.1, 0.0], [0.0, 0.1]]])  # 1 state, 4 actions
-    out = monotone(raw, ["decrease", "increase"])
+    out = np.empty_like(raw)
+    monotone(raw, safe_steps(["decrease", "increase"]), out)
     assert out[0, :, 0].tolist() == [0.0, 0.2, 0.2, 0.2]  # slower is safer: max from the left
     assert out[0, :, 1].tolist() == [0.3, 0.1, 0.1, 0.1]  # faster is safer: max from the right
 
@@ -92,6 +102,49 @@ def test_choose_keeps_a_safe_proposal_and_otherwise_the_nearest_allowed() -> Non
     assert pick([0.5, 0.51, 0.9], 1, -1) == 1  # within the margin
     assert pick([0.0, 0.9, 0.0], 1, -1) == 0  # tie: the safe side
     assert pick([0.0, 0.9, 0.0], 1, 1) == 2
+
+
+def random_model(seed: int, n: int, q: int = 6, n_c: int = 2) -> OutcomeCounts:
+    """Counts of random tries, moves and failures."""
+    rng = np.random.default_rng(seed)
+    model = counts(n, q, n_c)
+    for _ in range(40 * n):
+        state, action = int(rng.integers(n)), int(rng.integers(q))
+        if rng.random() < 0.1:
+            model.learn_failure(state, action, int(rng.integers(n_c)))
+        else:
+            model.learn_move(state, action, int(rng.integers(n)))
+    return model
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_compiled_value_iteration_gives_the_numpy_reading_bit_for_bit(seed: int) -> None:
+    model = random_model(seed, n=[1, 3, 40][seed % 3])
+    directions = ["decrease", "increase"]
+    for horizon in (1, 2, 8):
+        args = (model.tries, model.failures, model.moves(), directions, horizon, 1.0)
+        np.testing.assert_array_equal(horizon_risk(*args), reference.horizon_risk(*args))
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_choose_gives_the_numpy_reading(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    total = rng.choice([0.0, 0.01, 0.2, 0.5], size=9)
+    proposed, step = int(rng.integers(9)), int(rng.choice([-1, 1]))
+    limit = kept_limit(total, 0.0, 0.001)
+    assert choose(total, proposed, limit, step) == reference.choose(total, proposed, limit, step)
+
+
+def test_decide_reads_the_belief_risk_and_chooses_on_the_safe_side() -> None:
+    table = np.zeros((2, 3, 2))
+    table[0, 2, 0] = 0.8  # state 0: accelerating crashes
+    table[1, 0, 1] = 0.6  # state 1: braking falls behind
+    by_bin = np.empty((3, 2))
+    index, prob = np.array([0, 1]), np.array([0.75, 0.25])
+    limit, worst, final = decide(table, index, prob, 2, 0.0, 0.001, safe_steps(
+        ["decrease", "increase"]), by_bin)
+    np.testing.assert_allclose(by_bin, [[0.0, 0.15], [0.0, 0.0], [0.6, 0.0]], atol=1e-15)
+    assert limit == pytest.approx(0.001) and worst == 0 and final == 1
 
 
 def crash_world(shield: Shield, episodes: int, seed: int) -> int:

@@ -1,0 +1,109 @@
+"""Plain numpy readings of the compiled kernels' equations, for the tests only: each kernel
+must give their numbers, bit for bit, on random inputs."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+def monotone(q_table: FloatArray, directions: Sequence[str]) -> FloatArray:
+    """The running maximum of each criterion's risk from its safe end of the action range."""
+    out = np.empty_like(q_table)
+    for c, direction in enumerate(directions):
+        if direction == "decrease":
+            np.maximum.accumulate(q_table[:, :, c], axis=1, out=out[:, :, c])
+        else:
+            out[:, ::-1, c] = np.maximum.accumulate(q_table[:, ::-1, c], axis=1)
+    return out
+
+
+def horizon_risk(tries: IntArray, failures: IntArray,
+                 moves: tuple[IntArray, IntArray, IntArray], directions: Sequence[str],
+                 horizon: int, prior_safe: float) -> FloatArray:
+    """Finite-horizon value iteration on the counted outcomes (app.core.risk.horizon_risk)."""
+    n, q, n_c = failures.shape
+    rows, cols, counts = moves
+    denominator = tries + prior_safe
+    p_fail = failures / denominator[:, :, None]
+    p_move = counts / denominator.ravel()[rows]
+    tried = tries > 0
+    q_table = monotone(p_fail, directions)
+    for _ in range(horizon - 1):
+        best = q_table.sum(axis=2).argmin(axis=1)
+        value = q_table[np.arange(n), best]
+        value[~tried.any(axis=1)] = 0.0
+        ahead = np.empty((n * q, n_c))
+        for c in range(n_c):
+            ahead[:, c] = np.bincount(rows, weights=p_move * value[cols, c], minlength=n * q)
+        q_table = monotone(p_fail + ahead.reshape(n, q, n_c), directions)
+    return q_table
+
+
+def choose(total: FloatArray, proposed_bin: int, limit: float, safe_step: int) -> int:
+    """The proposal when within the limit, else the nearest allowed bin, ties to the safe
+    side."""
+    if total[proposed_bin] <= limit:
+        return proposed_bin
+    allowed = np.flatnonzero(total <= limit)
+    distance = np.abs(allowed - proposed_bin) * 2 - (np.sign(allowed - proposed_bin) == safe_step)
+    return int(allowed[int(distance.argmin())])
+
+
+def recognise(sq_distances: FloatArray, variances: FloatArray,
+              k: int) -> tuple[IntArray, FloatArray]:
+    """Eq. 1 as a softmax of ``-d^2 / var`` over the top k states (app.core.belief)."""
+    logits = -sq_distances / variances
+    index = np.flatnonzero(logits >= logits.max() + np.log(np.finfo(np.float64).eps))
+    if sq_distances.shape[0] <= k:
+        index = np.arange(sq_distances.shape[0])
+    elif index.size > k:  # the k largest, ties to the lower index
+        index = np.sort(index[np.argsort(-logits[index], kind="stable")[:k]])
+    weights = np.exp(logits[index] - logits[index].max())
+    keep = weights > 0.0
+    return index[keep], weights[keep] / weights[keep].sum()
+
+
+def cluster(state: dict[str, FloatArray], z: FloatArray, epsilon: float, rho: float,
+            max_states: int) -> str:
+    """One eTS+ step with the radius spread (app.core.clustering) on plain arrays in
+    ``state`` (centres, potentials, radii, support, scatter, beta, sigma, k)."""
+    state["k"] += 1
+    k, theta = state["k"], float(np.sum(z * z))
+    centres = state["centres"]
+    if not len(centres):
+        state.update(centres=z[None], potentials=np.ones(1), radii=np.full(1, epsilon),
+                     support=np.ones(1), scatter=np.zeros(1))
+        kind = "new"
+    else:
+        d2 = np.maximum(np.sum(centres * centres, axis=1) - 2.0 * np.sum(centres * z, axis=1)
+                        + theta, 0.0)
+        nu = float(np.sum(z * state["beta"]))
+        p_new = (k - 1) / ((k - 1) * (theta + 1.0) + state["sigma"] - 2.0 * nu)
+        pot = state["potentials"] = (k - 1) * state["potentials"] / (
+            k - 2 + state["potentials"] * (1.0 + d2))
+        nearest = int(d2.argmin())
+        candidate = p_new > pot.max() or p_new < pot.min()
+        if candidate and np.sqrt(d2[nearest]) < epsilon:
+            centres[nearest], pot[nearest] = z, p_new
+            kind = "replaced"
+        elif candidate and len(centres) < max_states:
+            state["centres"] = np.vstack([centres, z])
+            for name, value in (("potentials", p_new), ("radii", epsilon), ("support", 1.0),
+                                ("scatter", 0.0)):
+                state[name] = np.append(state[name], value)
+            kind = "new"
+        else:
+            state["support"][nearest] += 1
+            state["scatter"][nearest] += d2[nearest]
+            local = np.sqrt(state["scatter"][nearest] / state["support"][nearest])
+            state["radii"][nearest] = rho * state["radii"][nearest] + (1.0 - rho) * local
+            kind = "assigned"
+    state["beta"] = state["beta"] + z
+    state["sigma"] += theta
+    return kind
