@@ -296,11 +296,11 @@ def choose(total: FloatArray, proposed_bin: int, limit: float, safe_step: int
 @njit(cache=True)
 def decide(table: FloatArray, index: IntArray, prob: FloatArray, proposed_bin: int,
            threshold: float, margin: float, safe: IntArray, by_bin: FloatArray
-           ) -> tuple[float, int, int]:
+           ) -> tuple[float, int, int, bool]:
     """One step of the risk reviser on the table: ``by_bin`` (actions x criteria) gets the
     risk under the belief, ``sum_i belief_i Q(i, a)``; returns the limit (:func:`kept_limit`),
-    the proposal's riskiest criterion and the bin to apply (:func:`choose`, towards that
-    criterion's safe side)."""
+    the proposal's riskiest criterion, the bin to apply (:func:`choose`, towards that
+    criterion's safe side) and whether that is the proposal because it is within the limit."""
     q, n_c = by_bin.shape
     total = np.empty(q)
     for a in range(q):
@@ -317,7 +317,8 @@ def decide(table: FloatArray, index: IntArray, prob: FloatArray, proposed_bin: i
     for c in range(1, n_c):
         if by_bin[proposed_bin, c] > by_bin[proposed_bin, worst]:
             worst = c
-    return limit, worst, choose(total, proposed_bin, limit, safe[worst])
+    kept = total[proposed_bin] <= limit
+    return limit, worst, choose(total, proposed_bin, limit, safe[worst]), kept
 
 
 def _read_only(view: npt.NDArray[Any]) -> npt.NDArray[Any]:

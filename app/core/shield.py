@@ -12,7 +12,7 @@ import copy
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -22,7 +22,7 @@ from app.core import actions, reviser, risk
 from app.core._arrays import ensure_capacity
 from app.core.belief import Belief, recognise
 from app.core.clustering import EvolvingClusterer
-from app.core.config import ShieldConfig
+from app.core.config import ActionSpec, ShieldConfig
 from app.core.errors import (
     InvalidAction,
     InvalidConfig,
@@ -33,6 +33,8 @@ from app.core.errors import (
 )
 from app.core.flags import StateFlags
 from app.core.lazy_tpm import LazyTransitions
+from app.core.observation import ObservationSpace
+from app.core.observation import check as check_observation
 from app.core.tpm import DenseTransitions, TransitionModel
 
 FloatArray = npt.NDArray[np.float64]
@@ -53,9 +55,53 @@ class Candidate:
     risk: dict[str, float] | None = None
 
 
-@dataclass(frozen=True)
+class RiskCandidates(Sequence[Candidate]):
+    """The bins the risk reviser passed over, from the proposal's neighbour to the bin
+    applied, built on first use from the step's risk per bin (most callers never read them).
+    """
+
+    def __init__(self, bins: range, by_bin: FloatArray, limit: float,
+                 names: Sequence[str], action: ActionSpec) -> None:
+        self._bins, self._by_bin, self._limit = bins, by_bin, limit
+        self._names, self._action = names, action
+        self._built: tuple[Candidate, ...] | None = None
+
+    def _all(self) -> tuple[Candidate, ...]:
+        if self._built is None:
+            names, by_bin = self._names, self._by_bin
+            self._built = tuple(
+                Candidate(actions.decode(r, self._action), r,
+                          "ok" if by_bin[r].sum() <= self._limit
+                          else names[int(by_bin[r].argmax())],
+                          {name: float(v) for name, v in zip(names, by_bin[r], strict=True)})
+                for r in self._bins)
+        return self._built
+
+    @overload
+    def __getitem__(self, i: int) -> Candidate: ...
+    @overload
+    def __getitem__(self, i: slice) -> tuple[Candidate, ...]: ...
+
+    def __getitem__(self, i: int | slice) -> Candidate | tuple[Candidate, ...]:
+        return self._all()[i]
+
+    def __len__(self) -> int:
+        return len(self._bins)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Sequence) and self._all() == tuple(other)
+
+    def __hash__(self) -> int:
+        return hash(self._all())
+
+    def __repr__(self) -> str:
+        return repr(self._all())
+
+
+@dataclass(slots=True)
 class Decision:
-    """The decision record of one step (docs/api.md)."""
+    """The decision record of one step (docs/api.md). Built on every step, so a plain slotted
+    record: a frozen dataclass's constructor costs about three times as much."""
 
     action: float | None
     proposed: float | None
@@ -64,7 +110,7 @@ class Decision:
     verdict: str
     risk: dict[str, float]
     threshold: float | None
-    candidates: tuple[Candidate, ...]
+    candidates: Sequence[Candidate]
     state: int | None
     n_states: int
     new_state: bool
@@ -118,6 +164,7 @@ class StreamState:
     applied_bin: int = 0
     proposed_bin: int = 0
     step: int = 0
+    recognised: int = -1  # the belief's most likely state, -1 without a belief
 
 
 @dataclass
@@ -141,25 +188,11 @@ class Shield:
             raise InvalidConfig(
                 "on_replace='reset' needs the lazy TPM backend", field="transitions.on_replace"
             )
-        self._dim = cfg.observation.size
-        features = cfg.observation.features
-        self._feature_w = np.array([f.weights for f in features]).reshape(-1, self._dim)
-        self._feature_d = np.array([f.divide_by or (0.0,) * self._dim for f in features]
-                                   ).reshape(-1, self._dim)
-        self._feature_ratio = np.array([bool(f.divide_by) for f in features], dtype=bool)
-        self._feature_floor = np.array([f.floor for f in features], dtype=np.float64)
-        self._feature_low = np.array([f.low for f in features], dtype=np.float64)
-        self._feature_range = np.array([f.high - f.low for f in features], dtype=np.float64)
-        self._raw = cfg.observation.cluster_raw
-        self._zdim = self._dim * self._raw + len(features)
-        knee = np.array(cfg.observation.knee or [0.0] * self._dim)
-        self._curved = knee > 0 if knee.any() else None  # the dimensions with a knee
-        self._knee = np.where(knee > 0, knee, 1.0)
-        low, high = np.array(cfg.observation.low), np.array(cfg.observation.high)
-        self._low = self._warp(low)
-        self._range: FloatArray = high - low
+        self.space = ObservationSpace(cfg.observation)
+        self._dim = self.space.dim
         self._directions = [c.direction for c in cfg.criteria]
         self._safe_steps = risk.safe_steps(self._directions)
+        self._names = tuple(c.name for c in cfg.criteria)
         # the paper's a_max bounds a range symmetric about 0: the half-width, so that the
         # revision noise follows the width of any range, not where it lies
         self._a_max = (cfg.action.high - cfg.action.low) / 2
@@ -168,7 +201,7 @@ class Shield:
     def reset(self) -> None:
         """Forget everything: no states, no streams, counters at zero, the seed's generator."""
         cfg = self.config
-        self.clusterer = EvolvingClusterer(cfg.clustering, self._zdim, cfg.limits.max_states)
+        self.clusterer = EvolvingClusterer(cfg.clustering, self.space.size, cfg.limits.max_states)
         self.transitions: TransitionModel = self._new_transitions()
         self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria),
                                 cfg.reviser.flag_min_rate)
@@ -193,49 +226,12 @@ class Shield:
         return self.clusterer.n_states
 
     def normalise(self, observation: FloatArray) -> FloatArray:
-        """Physical units to the clustering space: ``(z - low) / (high - low)``, z and low
-        through their dimension's knee first, followed by the
-        configured features, each clipped to its range and scaled by it."""
-        parts = []
-        if self._raw:
-            parts.append((self._warp(observation) - self._low) / self._range)
-        if self._feature_w.shape[0]:
-            value = self._feature_w @ observation
-            divisor = np.maximum(self._feature_d @ observation, self._feature_floor)
-            value = np.where(self._feature_ratio, value / divisor, value)
-            lifted = (value - self._feature_low) / self._feature_range
-            parts.append(np.clip(lifted, 0.0, 1.0))
-        z: FloatArray = parts[0] if len(parts) == 1 else np.concatenate(parts)
-        return z
+        """Physical units to the clustering space (:class:`ObservationSpace`)."""
+        return self.space.normalise(observation)
 
     def physical(self, z: FloatArray) -> FloatArray:
-        """The clustering space back to physical units: the observation (the inverse of
-        :meth:`normalise`) where it is clustered, then each feature's value."""
-        n_raw = self._dim if self._raw else 0
-        features = self._feature_low + z[..., n_raw:] * self._feature_range
-        if not self._raw:
-            return features
-        raw = self._raw_physical(z[..., :n_raw])
-        return np.concatenate([raw, features], axis=-1) if features.shape[-1] else raw
-
-    def _raw_physical(self, z: FloatArray) -> FloatArray:
-        warped = self._low + z * self._range
-        if self._curved is None:
-            return warped
-        k = self._knee
-        inner = np.abs(warped) <= 2 * k
-        unwarped = np.where(inner, warped / 2, warped - np.sign(warped) * k)
-        out: FloatArray = np.where(self._curved, unwarped, warped)
-        return out
-
-    def _warp(self, x: FloatArray) -> FloatArray:
-        """Each dimension with a knee k > 0 counts its first k twice: ``x + clip(x, -k, k)``."""
-        if self._curved is None:
-            return x
-        k = self._knee
-        warped = x + np.clip(x, -k, k)
-        out: FloatArray = np.where(self._curved, warped, x)
-        return out
+        """The clustering space back to physical units (:class:`ObservationSpace`)."""
+        return self.space.physical(z)
 
     # --- one step --------------------------------------------------------------------------
 
@@ -288,10 +284,11 @@ class Shield:
                 f"observation must hold {self._dim} numbers, got shape {list(z.shape)}",
                 field="observation",
             )
-        if not np.isfinite(z).all():
+        problem = check_observation(z, MAX_MAGNITUDE)
+        if problem == 1:
             raise InvalidObservation("observation must be finite (no NaN or infinity)",
                                      field="observation")
-        if (np.abs(z) > MAX_MAGNITUDE).any():
+        if problem == 2:
             raise InvalidObservation(f"observation values must lie within +-{MAX_MAGNITUDE:g}",
                                      field="observation")
         if not isinstance(stream, str) or not 1 <= len(stream) <= 128:
@@ -355,8 +352,7 @@ class Shield:
         # flags on the recognised state
         recognised = belief.argmax()
         self._learn_outcome(state, recognised, step)
-        entered = state.belief is None or state.belief.argmax() != recognised
-        self.flags.observe(recognised, step.event, entered)
+        self.flags.observe(recognised, step.event, state.recognised != recognised)
         self.counters.steps += 1
         self.counters.model_version += 1
 
@@ -365,7 +361,7 @@ class Shield:
             self._refresh_risk()
             closing = self._closing(step, recognised, update.is_new, state.step)
             if cfg.transitions.across_episodes:  # A13 literal: the next reset is learned
-                state.belief, state.step = belief, 0
+                state.belief, state.recognised, state.step = belief, recognised, 0
             else:
                 del self.streams[step.stream]
             return closing
@@ -374,9 +370,10 @@ class Shield:
             self._refresh_risk()
         decision = self._decide(step, belief, recognised, update.is_new, state.step, self._rng)
         assert decision.action is not None and step.action is not None
-        state.belief = belief
-        state.applied_bin = actions.encode(decision.action, cfg.action)
+        state.belief, state.recognised = belief, recognised
         state.proposed_bin = actions.encode(step.action, cfg.action)
+        state.applied_bin = (state.proposed_bin if decision.action == step.action
+                             else actions.encode(decision.action, cfg.action))
         state.step += 1
         if decision.revised and not decision.shadow:
             self.counters.interventions[decision.verdict] += 1
@@ -410,7 +407,7 @@ class Shield:
             return
         action_bin = (state.applied_bin if step.applied_action is None
                       else actions.encode(step.applied_action, self.config.action))
-        previous = state.belief.argmax()
+        previous = state.recognised
         if step.event is None:
             self.outcomes.learn_move(previous, action_bin, recognised)
             return
@@ -489,6 +486,21 @@ class Shield:
         index: int,
         rng: np.random.Generator,
     ) -> Decision:
+        """The reviser's decision on the proposed action: the risk reviser's (the default) or
+        the paper's."""
+        if self.config.reviser.method == "risk":
+            return self._decide_by_risk(step, belief, recognised, is_new, index)
+        return self._decide_by_flags(step, belief, recognised, is_new, index, rng)
+
+    def _decide_by_flags(
+        self,
+        step: StepInput,
+        belief: Belief,
+        recognised: int,
+        is_new: bool,
+        index: int,
+        rng: np.random.Generator,
+    ) -> Decision:
         """Algs. 1-3 on the proposed action, and the revision with its noise."""
         cfg = self.config
         proposed = step.action
@@ -508,8 +520,6 @@ class Shield:
             episode=self.counters.episodes, step=index,
             model_version=self.counters.model_version, stream=step.stream, shadow=step.shadow,
         )
-        if cfg.reviser.method == "risk":
-            return self._decide_by_risk(step, belief, common)
         if flagged[0].size == 0:
             return Decision(action=proposed, revised=False, reason="cold_start", verdict="ok",
                             risk=self._risk(None), threshold=None, candidates=(),
@@ -544,48 +554,45 @@ class Shield:
             candidates=candidates, suggested=revised, **record, **common,  # type: ignore[arg-type]
         )
 
-    def _decide_by_risk(self, step: StepInput, belief: Belief,
-                        common: dict[str, Any]) -> Decision:
+    def _decide_by_risk(self, step: StepInput, belief: Belief, recognised: int,
+                        is_new: bool, index: int) -> Decision:
         """The risk reviser (:mod:`app.core.risk`): keep the proposal unless its risk is over
         the threshold and beyond the margin of the safest action; then the nearest allowed."""
         cfg = self.config
         proposed = step.action
         assert proposed is not None
+        decision = Decision(
+            action=proposed, proposed=proposed, revised=False, reason="cold_start",
+            verdict="ok", risk=self._risk(None), threshold=None, candidates=(),
+            state=recognised, n_states=self.n_states, new_state=is_new,
+            episode=self.counters.episodes, step=index,
+            model_version=self.counters.model_version, stream=step.stream, shadow=step.shadow,
+            suggested=proposed,
+        )
         if not self.outcomes.any_failure:
-            return Decision(action=proposed, revised=False, reason="cold_start", verdict="ok",
-                            risk=self._risk(None), threshold=None, candidates=(),
-                            suggested=proposed, **common)
+            return decision
         start = actions.encode(proposed, cfg.action)
         by_bin = np.empty((cfg.action.n_bins, len(cfg.criteria)))
-        limit, worst, final = risk.decide(
+        limit, worst, final, kept = risk.decide(
             self._risk_table, belief.index, belief.prob, start, cfg.risk.threshold,
             cfg.risk.margin, self._safe_steps, by_bin)
-        total = by_bin.sum(axis=1)
-        names = [c.name for c in cfg.criteria]
-
-        def named(r: int) -> dict[str, float]:
-            return {name: float(v) for name, v in zip(names, by_bin[r], strict=True)}
-
+        names = self._names
+        decision.risk = {name: float(v) for name, v in zip(names, by_bin[start], strict=True)}
+        decision.threshold = limit
+        decision.verdict = "ok" if kept else names[worst]
         active = self.counters.episodes >= cfg.reviser.activate_after_episodes
-        if total[start] <= limit or not active:
-            reason = "pass" if active else "inactive"
-            verdict = "ok" if total[start] <= limit else names[worst]
-            return Decision(action=proposed, revised=False, reason=reason, verdict=verdict,
-                            risk=named(start), threshold=limit, candidates=(),
-                            suggested=proposed, **common)
+        if kept or not active:
+            decision.reason = "pass" if active else "inactive"
+            return decision
         way = 1 if final > start else -1
-        candidates = tuple(
-            Candidate(actions.decode(r, cfg.action), r,
-                      "ok" if total[r] <= limit else names[int(by_bin[r].argmax())], named(r))
-            for r in range(start + way, final + way, way)
-        )
-        revised = actions.decode(final, cfg.action)
-        reason = "revised_safety" if final < start else "revised_speed"
-        return Decision(
-            action=proposed if step.shadow else revised, revised=True, reason=reason,
-            verdict=names[worst], risk=named(start), threshold=limit, candidates=candidates,
-            suggested=revised, **common,
-        )
+        decision.candidates = RiskCandidates(range(start + way, final + way, way), by_bin,
+                                             limit, names, cfg.action)
+        decision.suggested = actions.decode(final, cfg.action)
+        decision.revised = True
+        decision.reason = "revised_safety" if final < start else "revised_speed"
+        if not step.shadow:
+            decision.action = decision.suggested
+        return decision
 
     def _verdict_name(self, verdict: int) -> str:
         return "ok" if verdict == reviser.OK else self.config.criteria[verdict].name
@@ -697,7 +704,7 @@ class Shield:
         )
         self._rng.bit_generator.state = data["rng"]
         limit = cfg.limits.max_states
-        self.clusterer = EvolvingClusterer.restore(cfg.clustering, self._zdim, limit,
+        self.clusterer = EvolvingClusterer.restore(cfg.clustering, self.space.size, limit,
                                                    data["clustering"])
         tpm = data["transitions"]
         if tpm["backend"] == "dense":
@@ -737,7 +744,8 @@ class Shield:
                                           high=q - 1),
                            stored.integer(data["proposed_bin"], f"{field}.proposed_bin",
                                           high=q - 1),
-                           stored.integer(data["step"], f"{field}.step"))
+                           stored.integer(data["step"], f"{field}.step"),
+                           -1 if belief is None else belief.argmax())
 
     def _restore_risk(self, data: dict[str, Any], n: int) -> None:
         """The outcome counts and the risk table; a format-2 snapshot (from before the risk

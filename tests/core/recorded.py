@@ -33,14 +33,16 @@ def preset(name: str) -> ShieldConfig:
 
 
 def drive(config: ShieldConfig, steps: int = STEPS, seed: int = 0) -> dict[str, npt.NDArray]:
-    """Run the loop; per step the applied action, recognised state, state count and whether
-    the step was revised, and the closing snapshot's risk table where there is one."""
+    """Run the loop; per step the applied action, recognised state, state count, whether the
+    step was revised, why and the verdict, and the closing snapshot's risk table."""
     rng = np.random.default_rng(seed)
     shield = Shield(config)
     applied = np.full(steps, np.nan)
     state = np.full(steps, -1, dtype=np.int64)
     n_states = np.zeros(steps, dtype=np.int64)
     revised = np.zeros(steps, dtype=bool)
+    reason = np.zeros(steps, dtype="U16")
+    verdict = np.zeros(steps, dtype="U16")
     gap, v_ego, v_lead, target, lag, start = 40.0, 15.0, 15.0, 20.0, 0.0, 0
     for t in range(steps):
         observation = [v_ego, gap, v_lead]
@@ -61,9 +63,10 @@ def drive(config: ShieldConfig, steps: int = STEPS, seed: int = 0) -> dict[str, 
         state[t] = -1 if decision.state is None else decision.state
         n_states[t] = decision.n_states
         revised[t] = decision.revised
+        reason[t], verdict[t] = decision.reason, decision.verdict
     table = shield.snapshot()["risk"]["table"]
     return {"applied": applied, "state": state, "n_states": n_states, "revised": revised,
-            "risk_table": table}
+            "reason": reason, "verdict": verdict, "risk_table": table}
 
 
 def path(name: str) -> Path:

@@ -14,7 +14,7 @@ def test_a_long_closed_loop_sequence_decides_as_recorded(name: str) -> None:
     recorded = np.load(path(name))
     now = drive(preset(name))
     assert recorded["revised"].sum() > 1000  # the reviser was at work in the recording
-    for key in ("state", "n_states", "revised"):
+    for key in ("state", "n_states", "revised", "reason", "verdict"):
         np.testing.assert_array_equal(now[key], recorded[key], err_msg=key)
     np.testing.assert_array_equal(now["applied"], recorded["applied"])
     np.testing.assert_array_equal(now["risk_table"], recorded["risk_table"])

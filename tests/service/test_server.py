@@ -259,27 +259,30 @@ def test_a_long_batch_on_one_model_does_not_stall_another(live_server: Server) -
     steps = [{"observation": z, "action": None if d else a, "done": d}
              for z, a, d in random_stream(3, 4096)]
     finished = threading.Event()
-    duration = 0.0
+    durations: list[float] = []
 
-    def long_batch() -> None:
-        nonlocal duration
-        start = time.perf_counter()
+    def long_batch() -> None:  # four of the largest batches, one after the other
         with ShieldClient(live_server.url, model="busy", timeout=120) as busy:
-            busy.revise_batch(steps)
-        duration = time.perf_counter() - start
+            for _ in range(4):
+                start = time.perf_counter()
+                busy.revise_batch(steps)
+                durations.append(time.perf_counter() - start)
         finished.set()
 
     worker = threading.Thread(target=long_batch)
-    worker.start()
     latencies = []
     with ShieldClient(live_server.url, model="quiet") as quiet:
+        quiet.revise([10.0, 50.0, 12.0], 0.5)  # the connection and the model's first step
+        worker.start()
         time.sleep(0.2)  # the batch is under way
         while not finished.is_set():
             start = time.perf_counter()
             quiet.revise([10.0, 50.0, 12.0], 0.5)
             latencies.append(time.perf_counter() - start)
     worker.join()
-    # a step that waited for the batch would take about the batch's whole duration
-    assert len(latencies) > 20, (len(latencies), duration)
-    assert max(latencies) < duration / 3, (max(latencies), duration)
+    # steps that waited for the batches would take the rest of a batch each: few would
+    # finish, and most would be slow (a stray slow step on this busy machine is no stall)
+    assert len(latencies) > 20, (len(latencies), durations)
+    assert sorted(latencies)[int(0.9 * len(latencies))] < min(durations) / 3, (latencies,
+                                                                                durations)
     assert sorted(latencies)[len(latencies) // 2] < 0.05

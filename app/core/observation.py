@@ -1,0 +1,102 @@
+"""The clustering space: physical observations to normalised units and back.
+
+Each observed dimension is scaled to ``(x - low) / (high - low)``, a dimension with a knee
+``k > 0`` first warped to ``x + clip(x, -k, k)`` (its first k count twice, so that states are
+finer where small values matter, such as short headways); each configured feature (a linear
+combination or a ratio of the observation, :class:`~app.core.config.Feature`) is clipped to its
+range and scaled by it. The forward map runs on every step, compiled.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+
+from app.core.config import ObservationSpec
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+class ObservationSpace:
+    """The normalisation of one configuration's observations (and its inverse)."""
+
+    def __init__(self, spec: ObservationSpec) -> None:
+        self.dim = dim = spec.size
+        features = spec.features
+        self._raw = spec.cluster_raw
+        self.size = dim * self._raw + len(features)  # dimensions of the clustering space
+        self._weights = np.array([f.weights for f in features], dtype=np.float64).reshape(-1, dim)
+        self._divide_by = np.array([f.divide_by or (0.0,) * dim for f in features],
+                                   dtype=np.float64).reshape(-1, dim)
+        self._ratio = np.array([bool(f.divide_by) for f in features], dtype=np.bool_)
+        self._floor = np.array([f.floor for f in features], dtype=np.float64)
+        self._feature_low = np.array([f.low for f in features], dtype=np.float64)
+        self._feature_range = np.array([f.high - f.low for f in features], dtype=np.float64)
+        knee = np.array(spec.knee or [0.0] * dim, dtype=np.float64)
+        self._curved: BoolArray = knee > 0  # the dimensions with a knee
+        self._knee = np.where(self._curved, knee, 1.0)
+        low, high = np.array(spec.low, dtype=np.float64), np.array(spec.high, dtype=np.float64)
+        self._low = low + np.where(self._curved, np.clip(low, -self._knee, self._knee), 0.0)
+        self._range: FloatArray = high - low
+
+    def normalise(self, observation: FloatArray) -> FloatArray:
+        """Physical units (a float64 vector) to the clustering space."""
+        z = np.empty(self.size)
+        _normalise(observation, self._raw, self._curved, self._knee, self._low, self._range,
+                   self._weights, self._divide_by, self._ratio, self._floor,
+                   self._feature_low, self._feature_range, z)
+        return z
+
+    def physical(self, z: FloatArray) -> FloatArray:
+        """The clustering space back to physical units: the observation (the inverse of
+        :meth:`normalise`) where it is clustered, then each feature's value."""
+        n_raw = self.dim if self._raw else 0
+        features = self._feature_low + z[..., n_raw:] * self._feature_range
+        if not self._raw:
+            return features
+        warped = self._low + z[..., :n_raw] * self._range
+        k = self._knee
+        inner = np.abs(warped) <= 2 * k
+        unwarped = np.where(inner, warped / 2, warped - np.sign(warped) * k)
+        raw: FloatArray = np.where(self._curved, unwarped, warped)
+        return np.concatenate([raw, features], axis=-1) if features.shape[-1] else raw
+
+
+@njit(cache=True)
+def _normalise(x: FloatArray, raw: bool, curved: BoolArray, knee: FloatArray, low: FloatArray,
+               scale: FloatArray, weights: FloatArray, divide_by: FloatArray,
+               ratio: BoolArray, floor: FloatArray, feature_low: FloatArray,
+               feature_range: FloatArray, out: FloatArray) -> None:
+    at = 0
+    if raw:
+        for i in range(x.shape[0]):
+            value = x[i]
+            if curved[i]:
+                value += min(max(value, -knee[i]), knee[i])
+            out[i] = (value - low[i]) / scale[i]
+        at = x.shape[0]
+    for f in range(weights.shape[0]):
+        value = 0.0
+        for i in range(x.shape[0]):
+            value += weights[f, i] * x[i]
+        if ratio[f]:
+            divisor = 0.0
+            for i in range(x.shape[0]):
+                divisor += divide_by[f, i] * x[i]
+            value /= max(divisor, floor[f])
+        out[at + f] = min(max((value - feature_low[f]) / feature_range[f], 0.0), 1.0)
+
+
+@njit(cache=True)
+def check(x: FloatArray, limit: float) -> int:
+    """0 when every value is finite and within +-limit, 1 when one is not finite, 2 when one
+    is beyond the limit."""
+    for value in x:
+        if not np.isfinite(value):
+            return 1
+    for value in x:
+        if abs(value) > limit:
+            return 2
+    return 0

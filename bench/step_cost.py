@@ -1,0 +1,131 @@
+"""Cost of one step of the default shield (the risk reviser) as the model grows.
+
+For each size n a model is built through the core's own API (n states spread over the
+normalised observation cube, 20 learned transitions and 40 counted outcomes per state along a
+random walk, one in 200 a failure, the risk table refreshed), then it runs the step the
+service runs for every request: validate, normalise, cluster, recognise, learn the transition
+and the outcome, read the risk of every action and decide. The risk table's refresh (at
+episode ends and every ``refresh_steps``) is left out here: ``bench/risk_refresh.py`` times it.
+
+Two workloads: ``keep``, a smooth controller whose proposals the shield mostly keeps, and
+``revise``, the strongest acceleration every step, which the shield replaces where braking is
+safer (each revision writes its candidates into the decision record).
+
+Reported: the median over rounds of the mean time per step, and its ratio to the smallest
+model's in the same run.
+
+    python bench/step_cost.py                        # 10, 1000 and 5000 states
+    python bench/step_cost.py --sizes 10 1000 --rounds 3 --steps 2000
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import statistics
+import time
+from typing import Any
+
+import numpy as np
+
+from app.core import LimitsConfig, ReviserConfig, Shield, ShieldConfig
+from app.core.config import RiskConfig
+from app.core.belief import recognise
+from app.core.clustering import EvolvingClusterer
+
+SEED = 0
+CRITERIA = ("collision", "large_distance")
+
+
+def build(n: int, seed: int = SEED) -> Shield:
+    """A default shield of n states with a learned history, the reviser active."""
+    config = ShieldConfig(
+        reviser=ReviserConfig(seed=seed, activate_after_episodes=0),
+        risk=RiskConfig(refresh_steps=10**9),
+        limits=LimitsConfig(max_states=n),
+    )
+    shield = Shield(config)
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(0.0, 1.0, (n, 3))
+    shield.clusterer = EvolvingClusterer.restore(config.clustering, 3, n, {
+        "k": 10 * n, "beta": centres.sum(axis=0) * 10, "sigma": float((centres**2).sum()) * 10,
+        "capacity_hits": 0, "centres": centres,
+        "sq_norms": np.array([float(c @ c) for c in centres]),
+        "potentials": np.full(n, 0.5), "radii": np.full(n, 0.6 / n ** (1 / 3)),
+        "support": np.full(n, 10), "scatter": np.full(n, 0.01),
+    })
+    for _ in range(n):
+        shield._add_state()
+    variances = shield.clusterer.variances()
+    k = config.limits.belief_top_k
+    z = rng.uniform(0, 1, 3)
+    prev = recognise(shield.clusterer.sq_distances(z), variances, k)
+    for t in range(40 * n):
+        z = np.clip(z + rng.normal(0, 0.05, 3), 0, 1)
+        belief = recognise(shield.clusterer.sq_distances(z), variances, k)
+        action = int(rng.integers(20))
+        if t % 2 == 0:
+            shield.transitions.learn_one(prev, action, belief)
+        if rng.random() < 0.005:
+            shield.outcomes.learn_failure(prev.argmax(), action, int(rng.integers(2)))
+        else:
+            shield.outcomes.learn_move(prev.argmax(), action, belief.argmax())
+        prev = belief
+    shield._refresh_risk()
+    return shield
+
+
+def steps(count: int, seed: int, workload: str) -> list[tuple[list[float], float]]:
+    """Observations drifting through the cube (physical units) and the proposals."""
+    rng = np.random.default_rng(seed + 1)
+    z = rng.uniform(0, 1, 3)
+    high = np.array(ShieldConfig().observation.high)
+    action, out = 0.0, []
+    for _ in range(count):
+        z = np.clip(z + rng.normal(0, 0.03, 3), 0, 1)
+        action = float(np.clip(action + rng.normal(0, 0.2), -2, 2))
+        out.append(([float(v) for v in z * high], 2.0 if workload == "revise" else action))
+    return out
+
+
+def time_steps(shield: Shield, block: list[tuple[list[float], float]]) -> tuple[float, float]:
+    """Seconds per step, and the share of steps revised."""
+    revised = 0
+    start = time.perf_counter()
+    for z, a in block:
+        revised += shield.step(z, a).revised
+    return (time.perf_counter() - start) / len(block), revised / len(block)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[10, 1000, 5000])
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--steps", type=int, default=5000)
+    args = parser.parse_args()
+    rows: list[dict[str, Any]] = []
+    for n in args.sizes:
+        shield = build(n)
+        time_steps(shield, steps(200, SEED + 99, "keep"))  # compiled and warm
+        row: dict[str, Any] = {"states": n}
+        for workload in ("keep", "revise"):
+            times, share = [], 0.0
+            for r in range(args.rounds):
+                t, share = time_steps(shield, steps(args.steps, SEED + r, workload))
+                times.append(t)
+            row[workload] = (statistics.median(times) * 1e6, share)
+        rows.append(row)
+    print(f"seed {SEED}; {args.rounds} rounds of {args.steps} steps; median of round means; "
+          f"{platform.machine()}, numpy {np.__version__}, Python {platform.python_version()}\n")
+    print("| states | keep: step (us) | x smallest | revised | revise: step (us) | x smallest "
+          "| revised |")
+    print("|---:|---:|---:|---:|---:|---:|---:|")
+    base = rows[0]
+    for row in rows:
+        cells = [f"{row[w][0]:.1f} | {row[w][0] / base[w][0]:.2f} | {row[w][1]:.0%}"
+                 for w in ("keep", "revise")]
+        print(f"| {row['states']} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()
