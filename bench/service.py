@@ -1,8 +1,9 @@
 """Latency and throughput of the shield service against floors of the same app, same run.
 
 The server runs in its own process pinned to one core (``taskset -c 0`` when available); the
-client runs here. For models of 10 and 1000 states (built by ``bench/core_step.py``, loaded
-with PUT as ``.npz``; two states flagged, so each step is learned and the proposal inspected):
+client runs here. For default models (the risk reviser) of 10 and 1000 states (built by
+``bench/step_cost.py``, loaded with PUT as ``.npz``; each step learned and its proposal
+decided on):
 
 * ``POST /models/{name}/revise`` with an httpx keep-alive client, against ``POST /bench/noop``
   (the same pydantic body in, a small JSON out);
@@ -35,7 +36,7 @@ import websocket
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.service import codec  # noqa: E402
-from bench.core_step import build, steps, variant  # noqa: E402
+from bench.step_cost import build, steps  # noqa: E402
 
 SEED = 0
 
@@ -65,7 +66,7 @@ def start(port: int, *options: str) -> subprocess.Popen[bytes]:
 
 def bodies(count: int, seed: int) -> list[str]:
     return [json.dumps({"observation": z, "action": a, "stream": "bench"})
-            for z, a in steps(count, seed, "inspect")]
+            for z, a in steps(count, seed, "keep")]
 
 
 def http_round(client: httpx.Client, path: str, payloads: list[str]) -> list[float]:
@@ -118,7 +119,7 @@ def main() -> None:
     try:
         with httpx.Client(base_url=base, timeout=60) as client:
             for n in (10, 1000):
-                blob = codec.to_npz(variant(build(n), "inspect"))
+                blob = codec.to_npz(build(n).snapshot())
                 name = f"s{n}"
                 r = client.put(f"/models/{name}", content=blob,
                                headers={"content-type": "application/x-npz"})

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from collections import Counter
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Path, Request, WebSocket
-from fastapi.responses import JSONResponse
+from fastapi.responses import Response
 from starlette.concurrency import run_in_threadpool
 
-from app.api.convert import to_step
+from app.api.convert import to_json, to_step
 from app.api.deps import BEARER_DOCUMENTED, RegistryDep, SettingsDep, check_token, require_token
 from app.api.errors import TooLarge
 from app.api.schemas import (
@@ -41,21 +42,25 @@ async def step_one(registry: ModelRegistry, name: str, step: Step) -> CoreDecisi
 
 def count(request: Request | WebSocket, name: str, decisions: list[CoreDecision]) -> None:
     counter = request.app.state.metrics.decisions
-    for d in decisions:
-        counter.labels(name, d.reason).inc()
+    for reason, n in Counter(d.reason for d in decisions).items():
+        counter.labels(name, reason).inc(n)
+
+
+def json_response(content: Any) -> Response:
+    return Response(to_json(content), media_type="application/json")
 
 
 @router.post("/models/{name}/revise", response_model=Decision, openapi_extra=BEARER_DOCUMENTED)
-async def revise_model(name: NamePath, body: ReviseRequest, request: Request) -> JSONResponse:
+async def revise_model(name: NamePath, body: ReviseRequest, request: Request) -> Response:
     """Answer one proposed action of a stream with the decision record."""
     check_token(request)
     decision = await step_one(request.app.state.registry, name, to_step(body))
     count(request, name, [decision])
-    return JSONResponse(decision.to_dict())
+    return json_response(decision)
 
 
 @router.post("/revise", response_model=Decision, openapi_extra=BEARER_DOCUMENTED)
-async def revise(body: ReviseRequest, request: Request) -> JSONResponse:
+async def revise(body: ReviseRequest, request: Request) -> Response:
     """One step of the 'default' model."""
     return await revise_model(DEFAULT_MODEL, body, request)
 
@@ -68,21 +73,21 @@ def check_size(n: int, limit: int) -> None:
 @router.post("/models/{name}/revise/batch", response_model=BatchResponse,
              dependencies=[Depends(require_token)])
 def revise_batch(name: NamePath, body: BatchRequest, registry: RegistryDep,
-                 settings: SettingsDep, request: Request) -> JSONResponse:
+                 settings: SettingsDep, request: Request) -> Response:
     """Steps of one model, applied in order; one bad step rejects the whole batch."""
     check_size(len(body.steps), settings.max_batch)
     decisions = registry.step_batch(name, [to_step(s) for s in body.steps])
     count(request, name, decisions)
-    return JSONResponse({"decisions": [d.to_dict() for d in decisions]})
+    return json_response({"decisions": decisions})
 
 
 @router.post("/revise/batch", response_model=BatchResponse, dependencies=[Depends(require_token)])
 def revise_across(body: ModelBatchRequest, registry: RegistryDep, settings: SettingsDep,
-                  request: Request) -> JSONResponse:
+                  request: Request) -> Response:
     """Steps across models (each names its model), in order; one bad step rejects them all."""
     check_size(len(body.steps), settings.max_batch)
     decisions = registry.step_many([(s.model, to_step(s)) for s in body.steps])
     assert decisions is not None
     for s, d in zip(body.steps, decisions, strict=True):
         count(request, s.model, [d])
-    return JSONResponse({"decisions": [d.to_dict() for d in decisions]})
+    return json_response({"decisions": decisions})

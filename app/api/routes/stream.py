@@ -8,7 +8,7 @@ from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
 
 from app.api.auth import given_token, token_ok
-from app.api.convert import to_step
+from app.api.convert import to_json, to_step
 from app.api.errors import POLICY_VIOLATION, error_body
 from app.api.routes.revise import NamePath, count, step_one
 from app.api.schemas import ReviseRequest
@@ -66,7 +66,7 @@ async def answer(websocket: WebSocket, registry: ModelRegistry, name: str, text:
     except ShieldError as error:
         return json.dumps(error_body(error.code, error.message, error.field))
     count(websocket, name, [decision])
-    return json.dumps(decision.to_dict())
+    return to_json(decision).decode()
 
 
 @router.websocket("/ws")
