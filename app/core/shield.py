@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, overload
 
@@ -68,14 +68,21 @@ class RiskCandidates(Sequence[Candidate]):
 
     def _all(self) -> tuple[Candidate, ...]:
         if self._built is None:
-            names, by_bin = self._names, self._by_bin
-            self._built = tuple(
-                Candidate(actions.decode(r, self._action), r,
-                          "ok" if by_bin[r].sum() <= self._limit
-                          else names[int(by_bin[r].argmax())],
-                          {name: float(v) for name, v in zip(names, by_bin[r], strict=True)})
-                for r in self._bins)
+            names, rows, built = self._names, self._by_bin.tolist(), []
+            for r in self._bins:
+                risk = rows[r]
+                total = risk[0]
+                for value in risk[1:]:  # summed in the order the decision summed them
+                    total += value
+                worst = max(range(len(risk)), key=risk.__getitem__)
+                built.append(Candidate(actions.decode(r, self._action), r,
+                                       "ok" if total <= self._limit else names[worst],
+                                       dict(zip(names, risk, strict=True))))
+            self._built = tuple(built)
         return self._built
+
+    def __iter__(self) -> Iterator[Candidate]:
+        return iter(self._all())
 
     @overload
     def __getitem__(self, i: int) -> Candidate: ...
