@@ -29,9 +29,9 @@ from typing import Any
 import numpy as np
 
 from app.core import LimitsConfig, ReviserConfig, Shield, ShieldConfig
-from app.core.config import RiskConfig
 from app.core.belief import recognise
 from app.core.clustering import EvolvingClusterer
+from app.core.config import RiskConfig
 
 SEED = 0
 CRITERIA = ("collision", "large_distance")
