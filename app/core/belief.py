@@ -82,14 +82,17 @@ def _recognise(sq_distances: FloatArray, variances: FloatArray, k: int, index: I
                prob: FloatArray) -> int:
     """Fill ``index`` (ascending) and ``prob`` with the belief; return its size."""
     n = sq_distances.shape[0]
+    logits = np.empty(n)
+    for i in range(n):  # apart from the reduction, so that it vectorises
+        logits[i] = -sq_distances[i] / variances[i]
     top = -math.inf
     for i in range(n):
-        top = max(top, -sq_distances[i] / variances[i])
+        top = max(top, logits[i])
     # the k largest logits within NEGLIGIBLE_LOGIT of the top, kept sorted by (logit desc,
     # index asc) in index/prob as scratch
     m = 0
     for i in range(n):
-        logit = -sq_distances[i] / variances[i]
+        logit = logits[i]
         if n > k and logit < top + NEGLIGIBLE_LOGIT:
             continue
         if m == k and logit <= prob[m - 1]:
@@ -102,7 +105,7 @@ def _recognise(sq_distances: FloatArray, variances: FloatArray, k: int, index: I
         m = min(m + 1, k)
     index[:m].sort()
     for j in range(m):
-        prob[j] = -sq_distances[index[j]] / variances[index[j]]
+        prob[j] = logits[index[j]]
     kept = 0
     for j in range(m):
         weight = math.exp(prob[j] - top)

@@ -198,8 +198,12 @@ def _dot(x: FloatArray, y: FloatArray) -> float:
 @njit(cache=True)
 def _sq_distances(centres: FloatArray, sq_norms: FloatArray, n: int, z: FloatArray,
                   theta: float, out: FloatArray) -> None:
+    dim = z.shape[0]
     for i in range(n):
-        d2 = sq_norms[i] - 2.0 * _dot(centres[i], z) + theta
+        dot = 0.0
+        for j in range(dim):
+            dot += centres[i, j] * z[j]
+        d2 = sq_norms[i] - 2.0 * dot + theta
         out[i] = d2 if d2 > 0.0 else 0.0
 
 
@@ -240,11 +244,11 @@ def _learn(z: FloatArray, k: int, beta: FloatArray, sigma: float, centres: Float
         nu = _dot(z, beta)
         p_new = (k - 1) / ((k - 1) * (theta + 1.0) + sigma - 2.0 * nu)
         # P_k(c_i) = (k-1) P_{k-1}(c_i) / (k-2 + P_{k-1}(c_i) (1 + d_i^2))
+        for i in range(n):  # apart from the reductions below, so that it vectorises
+            potentials[i] = (k - 1) * potentials[i] / (k - 2 + potentials[i] * (1.0 + d2[i]))
         nearest, p_max, p_min = 0, -math.inf, math.inf
         for i in range(n):
-            pot = (k - 1) * potentials[i] / (k - 2 + potentials[i] * (1.0 + d2[i]))
-            potentials[i] = pot
-            p_max, p_min = max(p_max, pot), min(p_min, pot)
+            p_max, p_min = max(p_max, potentials[i]), min(p_min, potentials[i])
             if d2[i] < d2[nearest]:
                 nearest = i
         delta = math.sqrt(d2[nearest])

@@ -44,7 +44,7 @@ SNAPSHOT_FORMAT = 3
 MAX_MAGNITUDE = 1e12
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Candidate:
     """An action the reviser inspected: the bin's midpoint, the bin, its verdict and (for the
     risk reviser) its risk per criterion."""
@@ -74,7 +74,7 @@ class RiskCandidates(Sequence[Candidate]):
                 total = risk[0]
                 for value in risk[1:]:  # summed in the order the decision summed them
                     total += value
-                worst = max(range(len(risk)), key=risk.__getitem__)
+                worst = risk.index(max(risk))
                 built.append(Candidate(actions.decode(r, self._action), r,
                                        "ok" if total <= self._limit else names[worst],
                                        dict(zip(names, risk, strict=True))))
@@ -97,9 +97,6 @@ class RiskCandidates(Sequence[Candidate]):
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Sequence) and self._all() == tuple(other)
-
-    def __hash__(self) -> int:
-        return hash(self._all())
 
     def __repr__(self) -> str:
         return repr(self._all())
