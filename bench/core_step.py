@@ -1,4 +1,4 @@
-"""Cost of one shield step as the model grows: the lazy TPMs against the dense baseline.
+"""Cost of one step of the paper's reviser as the model grows: the lazy TPMs against the dense one.
 
 For each size n a model is built through the core's own API (n states spread over the
 normalised observation cube, 20 transitions learned per state along a random walk), then both
@@ -39,9 +39,10 @@ SEED = 0
 
 
 def build(n: int, seed: int = SEED) -> dict[str, Any]:
-    """The snapshot of a lazy-backend model with n states and a learned history."""
-    config = ShieldConfig(
-        reviser=ReviserConfig(seed=seed), limits=LimitsConfig(max_states=n)
+    """The snapshot of a lazy-backend model of the paper's reviser with n states and a
+    learned history."""
+    config = ShieldConfig.paper(
+        reviser=ReviserConfig(method="paper", seed=seed), limits=LimitsConfig(max_states=n)
     )
     shield = Shield(config)
     rng = np.random.default_rng(seed)
@@ -54,8 +55,7 @@ def build(n: int, seed: int = SEED) -> dict[str, Any]:
         "support": np.full(n, 10), "scatter": np.full(n, 0.01),
     })
     for _ in range(n):
-        shield.transitions.add_state()
-        shield.flags.add_state()
+        shield._add_state()
     variances = shield.clusterer.variances()
     z = rng.uniform(0, 1, 3)
     prev = recognise(shield.clusterer.sq_distances(z), variances, config.limits.belief_top_k)

@@ -19,8 +19,7 @@ import time
 
 import numpy as np
 
-from app.core.belief import Belief
-from app.core.risk import OutcomeCounts, belief_risk, choose, horizon_risk, kept_limit
+from app.core.risk import OutcomeCounts, decide, horizon_risk, safe_steps
 
 ACTIONS, CRITERIA = 20, 2
 DIRECTIONS = ("decrease", "increase")
@@ -57,15 +56,16 @@ def measure(n: int, rounds: int, horizon: int) -> tuple[int, float, float, int]:
     moves = counts.moves()
     table = horizon_risk(counts.tries, counts.failures, moves, DIRECTIONS, horizon, 1.0)
     rng = np.random.default_rng(1)
-    index = np.sort(rng.choice(n, size=min(16, n), replace=False))
-    belief = Belief(index.astype(np.int64), np.full(index.size, 1.0 / index.size))
+    index = np.sort(rng.choice(n, size=min(16, n), replace=False)).astype(np.int64)
+    prob = np.full(index.size, 1.0 / index.size)
+    safe = safe_steps(DIRECTIONS)
+    by_bin = np.empty((ACTIONS, CRITERIA))
 
     def refresh() -> None:
         horizon_risk(counts.tries, counts.failures, moves, DIRECTIONS, horizon, 1.0)
 
     def read() -> None:
-        total = belief_risk(table, belief).sum(axis=1)
-        choose(total, 15, kept_limit(total, 0.0, 0.001), -1)
+        decide(table, index, prob, 15, 0.0, 0.001, safe, by_bin)
 
     refreshes = [timed(refresh, 3) for _ in range(rounds)]
     reads = [timed(read, 2000) for _ in range(rounds)]
