@@ -21,9 +21,10 @@ FloatArray = npt.NDArray[np.float64]
 IndexArray = npt.NDArray[np.int64]
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Belief:
-    """A sparse distribution over states: ascending ``index`` and matching ``prob`` (sum 1)."""
+    """A sparse distribution over states: ascending ``index`` and matching ``prob`` (sum 1).
+    Made on every step, so a plain slotted record (not frozen: that costs more to build)."""
 
     index: IndexArray
     prob: FloatArray

@@ -23,7 +23,7 @@ from app.core.errors import InvalidSnapshot
 FloatArray = npt.NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class StateUpdate:
     """What one observation did to the state set.
 

@@ -146,9 +146,10 @@ class Decision:
         return cls(**fields)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class StepInput:
-    """A validated step: what :meth:`Shield.apply` consumes."""
+    """A validated step: what :meth:`Shield.apply` consumes (made on every step: a plain
+    slotted record, not a frozen one, whose constructor costs several times as much)."""
 
     observation: FloatArray
     action: float | None
