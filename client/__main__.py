@@ -41,7 +41,7 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
                shield_config: str = "{}", lockstep: int = 0, trace: bool = False,
                device: str = "cpu", checkpoint_every: float | None = None,
                deadline: float | None = None, update_first: bool = False,
-               reward: str = "{}") -> str:
+               reward: str = "{}", ddpg: str = "{}") -> str:
     """Run, then report (or, stopped at ``deadline``, say how to go on); every failure a user
     can cause becomes one line."""
     try:
@@ -51,11 +51,18 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, tran
             arms=tuple(a.strip() for a in arms.split(",") if a.strip()), runs=runs,
             episodes=episodes, seed=seed, shield=shield, transport=transport,  # type: ignore[arg-type]
             lead=lead, shield_config=overrides,  # type: ignore[arg-type]
-            ddpg={"update_first": True} if update_first else {}, reward=json.loads(reward))
+            ddpg={**({"update_first": True} if update_first else {}), **json.loads(ddpg)},
+            reward=json.loads(reward))
         try:
             RewardConfig(**config.reward)  # refuse an unknown reward constant before any run
         except TypeError as error:
             fail(f"reward: {error}")
+        from client.agents.ddpg import DDPGConfig  # torch: only when a run starts
+
+        try:
+            DDPGConfig(**config.ddpg)
+        except TypeError as error:
+            fail(f"ddpg: {error}")
         if shield != "local":
             for url in config.shield_urls:
                 with contextlib.closing(ShieldClient(url, token=token)) as probe:
@@ -133,6 +140,9 @@ def run(
     reward: Annotated[str, typer.Option(
         help='Reward constants as JSON, e.g. \'{"failure_penalty": 60}\' (the paper\'s '
              'Eqs. 10-12 and none by default).')] = "{}",
+    ddpg: Annotated[str, typer.Option(
+        help='DDPG settings as JSON, e.g. \'{"intervention_penalty": 5}\' (the paper\'s '
+             'values by default).')] = "{}",
 ) -> None:
     """Run arms x runs x episodes (resumable: run it again to continue), then report."""
     if not lockstep and (lockstep_runs is not None or device != "cpu"
@@ -153,7 +163,7 @@ def run(
     deadline = None if stop_after is None else time.time() + 60.0 * stop_after
     typer.echo(experiment(arms, runs, episodes, seed, shield, transport, out, workers, token,
                           lead, shield_config, group, trace, device, every, deadline,
-                          update_first, reward))
+                          update_first, reward, ddpg))
     if (out / "table.md").exists() and not checkpoint.pending(out):
         typer.echo(f"\nrecords, summary.json, table.md and figure.png in {out}")
 
