@@ -4,9 +4,9 @@ same e-FSM steps in a plain loop and the WebSocket echo of the same app.
 The server (``bench/service_app.py --timing``) runs pinned to core 0 and times every call of
 ``ModelRegistry.step_many``: validation, journal (none here: models in memory) and the e-FSM
 step. A second process, pinned to the same core, runs the same steps through
-``Shield.step`` (validation and the e-FSM step) on the same model in a loop. Models of 10 and
-1000 states as in ``bench/service.py``; per round the WebSocket echo, then the steps; medians
-over rounds of the per-step medians.
+``Shield.step`` (validation and the e-FSM step) on the same model in a loop. Default models
+(the risk reviser) of 10 and 1000 states as in ``bench/service.py``; per round the WebSocket
+echo, then the steps; medians over rounds of the per-step medians.
 
     python bench/service_split.py --rounds 5 --requests 500
 """
@@ -27,20 +27,20 @@ import httpx
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.service import codec  # noqa: E402
-from bench.core_step import build, variant  # noqa: E402
 from bench.service import SEED, bodies, free_port, start, ws_round  # noqa: E402
+from bench.step_cost import build  # noqa: E402
 
 LOOP = """
 import json, statistics, sys, time
 sys.path.insert(0, {root!r})
 from app.core import Shield
-from bench.core_step import build, steps, variant
-snapshot = variant(build({n}), "inspect")
+from bench.step_cost import build, steps
+snapshot = build({n}).snapshot()
 out = []
 for r in range({rounds}):
     shield = Shield.from_snapshot(snapshot)
     times = []
-    for z, a in steps({requests}, {seed} + r, "inspect"):
+    for z, a in steps({requests}, {seed} + r, "keep"):
         start = time.perf_counter()
         shield.step(z, a, stream="bench")
         times.append(time.perf_counter() - start)
@@ -75,7 +75,7 @@ def main() -> None:
     try:
         with httpx.Client(base_url=base, timeout=60) as client:
             for n in (10, 1000):
-                blob = codec.to_npz(variant(build(n), "inspect"))
+                blob = codec.to_npz(build(n).snapshot())
                 echo, step, inside = [], [], []
                 for i in range(args.rounds):
                     r = client.put(f"/models/s{n}", content=blob,
