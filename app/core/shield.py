@@ -566,38 +566,40 @@ class Shield:
         cfg = self.config
         proposed = step.action
         assert proposed is not None
-        decision = Decision(
-            action=proposed, proposed=proposed, revised=False, reason="cold_start",
-            verdict="ok", risk=self._risk(None), threshold=None, candidates=(),
+        names = self._names
+        action = suggested = proposed
+        candidates: Sequence[Candidate] = ()
+        revised = False
+        if not self.outcomes.any_failure:
+            risks, limit, verdict, reason = self._risk(None), None, "ok", "cold_start"
+        else:
+            start = actions.encode(proposed, cfg.action)
+            by_bin = np.empty((cfg.action.n_bins, len(names)))
+            limit, worst, final, kept = risk.decide(
+                self._risk_table, belief.index, belief.prob, start, cfg.risk.threshold,
+                cfg.risk.margin, self._safe_steps, by_bin)
+            risks = dict(zip(names, by_bin[start].tolist(), strict=True))
+            verdict = "ok" if kept else names[worst]
+            if self.counters.episodes < cfg.reviser.activate_after_episodes:
+                reason = "inactive"
+            elif kept:
+                reason = "pass"
+            else:
+                way = 1 if final > start else -1
+                candidates = RiskCandidates(range(start + way, final + way, way), by_bin,
+                                            limit, names, cfg.action)
+                suggested = actions.decode(final, cfg.action)
+                action = proposed if step.shadow else suggested
+                reason = "revised_safety" if final < start else "revised_speed"
+                revised = True
+        return Decision(
+            action=action, proposed=proposed, revised=revised,
+            reason=reason, verdict=verdict, risk=risks, threshold=limit, candidates=candidates,
             state=recognised, n_states=self.n_states, new_state=is_new,
             episode=self.counters.episodes, step=index,
             model_version=self.counters.model_version, stream=step.stream, shadow=step.shadow,
-            suggested=proposed,
+            suggested=suggested,
         )
-        if not self.outcomes.any_failure:
-            return decision
-        start = actions.encode(proposed, cfg.action)
-        by_bin = np.empty((cfg.action.n_bins, len(cfg.criteria)))
-        limit, worst, final, kept = risk.decide(
-            self._risk_table, belief.index, belief.prob, start, cfg.risk.threshold,
-            cfg.risk.margin, self._safe_steps, by_bin)
-        names = self._names
-        decision.risk = {name: float(v) for name, v in zip(names, by_bin[start], strict=True)}
-        decision.threshold = limit
-        decision.verdict = "ok" if kept else names[worst]
-        active = self.counters.episodes >= cfg.reviser.activate_after_episodes
-        if kept or not active:
-            decision.reason = "pass" if active else "inactive"
-            return decision
-        way = 1 if final > start else -1
-        decision.candidates = RiskCandidates(range(start + way, final + way, way), by_bin,
-                                             limit, names, cfg.action)
-        decision.suggested = actions.decode(final, cfg.action)
-        decision.revised = True
-        decision.reason = "revised_safety" if final < start else "revised_speed"
-        if not step.shadow:
-            decision.action = decision.suggested
-        return decision
 
     def _verdict_name(self, verdict: int) -> str:
         return "ok" if verdict == reviser.OK else self.config.criteria[verdict].name
