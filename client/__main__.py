@@ -141,8 +141,8 @@ def run(
         help='Reward constants as JSON, e.g. \'{"failure_penalty": 60}\' (the paper\'s '
              'Eqs. 10-12 and none by default).')] = "{}",
     ddpg: Annotated[str, typer.Option(
-        help='DDPG settings as JSON, e.g. \'{"intervention_penalty": 5}\' (the paper\'s '
-             'values by default).')] = "{}",
+        help='DDPG settings as JSON, e.g. \'{"gamma": 0.99}\' (the paper\'s values, and '
+             'this project\'s where it gives none, by default).')] = "{}",
 ) -> None:
     """Run arms x runs x episodes (resumable: run it again to continue), then report."""
     if not lockstep and (lockstep_runs is not None or device != "cpu"

@@ -48,12 +48,6 @@ class DDPGConfig:
     # so the client runs it while a shield service computes the step (BENCHMARKS.md). Off:
     # the usual order, which every experiment recorded before it used
     update_first: bool = False
-    # Not in the paper: when the shield replaced the proposal, the learner also remembers its
-    # own proposal, with the step's reward less this penalty, so that the actor learns to
-    # avoid what the shield replaces instead of leaning on the shield (the punishment of an
-    # unsafe action in Alshiekh et al., "Safe Reinforcement Learning via Shielding", 2018).
-    # Off: 0, the paper's learner, which remembers only the executed action
-    intervention_penalty: float = 0.0
 
 
 class ReplaySample(NamedTuple):
@@ -216,15 +210,8 @@ class DDPG:
         return min(max(a, -A_MAX), A_MAX)
 
     def remember(self, obs: npt.NDArray[np.float32], executed: float, reward: float,
-                 next_obs: npt.NDArray[np.float32], terminal: bool,
-                 replaced: float | None = None) -> None:
-        """Store the executed transition, and with an ``intervention_penalty`` the proposal
-        the shield ``replaced`` (if it did) with the reward less the penalty."""
-        obs, next_obs = self.scale(obs), self.scale(next_obs)
-        self.buffer.add(obs, executed, reward, next_obs, terminal)
-        penalty = self.config.intervention_penalty
-        if replaced is not None and penalty:
-            self.buffer.add(obs, replaced, reward - penalty, next_obs, terminal)
+                 next_obs: npt.NDArray[np.float32], terminal: bool) -> None:
+        self.buffer.add(self.scale(obs), executed, reward, self.scale(next_obs), terminal)
 
     def update(self) -> None:
         """One gradient step of critic and actor, then the soft target update."""

@@ -153,8 +153,7 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
                 if recorder is not None:
                     recorder(proposals[k], info)
                 executed = place.meter.add(proposals[k], reward, info)
-                learner.members[j].remember(place.obs, executed, reward, next_obs, terminated,
-                                            proposals[k] if place.meter.replaced else None)
+                learner.members[j].remember(place.obs, executed, reward, next_obs, terminated)
                 place.obs, place.z = next_obs, info["efsm_observation"]
                 if terminated or truncated:
                     finish = _finisher(runs[k], place.episode, place.meter, info,

@@ -202,19 +202,15 @@ class EpisodeMeter:
         self.would = 0
         self.diffs: list[float] = []
         self.episode_return = 0.0
-        self.replaced = False  # whether the shield replaced the last step's proposal
 
     def add(self, proposed: float, reward: float, info: dict[str, Any]) -> float:
-        """Count one step; returns the action that was executed (:attr:`replaced` says
-        whether the shield replaced the proposal)."""
+        """Count one step; returns the action that was executed."""
         decision = info.get("shield")  # the decision record as JSON-able data
-        self.replaced = False
         if decision is not None and decision["revised"]:
             if decision["shadow"]:
                 self.would += 1
             else:
                 self.interventions[decision["verdict"]] += 1
-                self.replaced = True
         self.diffs.append(info["speed_difference"])
         self.episode_return += reward
         return proposed if decision is None else float(decision["action"])
@@ -256,8 +252,7 @@ def play(env: Any, agent: Controller, obs: Any, learner: Any | None,
             trace(proposed, info)
         executed = meter.add(proposed, reward, info)
         if learner is not None:
-            learner.remember(obs, executed, reward, next_obs, terminated,
-                             proposed if meter.replaced else None)
+            learner.remember(obs, executed, reward, next_obs, terminated)
             if not first:
                 learner.update()
         obs = next_obs

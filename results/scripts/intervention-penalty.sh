@@ -6,7 +6,8 @@
 # default shield with neither; then the chosen penalty (0.5, no failure penalty) on the
 # evaluation seeds (the reduced protocol: base seed 1000, 4 runs x 600). Resumable: run it
 # again to go on. Records and tables in results/tuning/intervention-penalty and
-# results/reduced/intervention-penalty.
+# results/reduced/intervention-penalty. The penalty lost and was removed after commit f18c10b:
+# run this script there.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 source scripts/_venv.sh

@@ -95,18 +95,3 @@ def test_the_update_is_autograds_and_adams_bit_for_bit() -> None:
     assert learner._steps.tolist() == [1000.0, 1000.0]
     assert_moments_are_adams(learner._moments, reference.moments)
 
-
-def test_an_intervention_penalty_also_remembers_the_replaced_proposal() -> None:
-    obs, following = np.full(4, 10.0, np.float32), np.full(4, 11.0, np.float32)
-    punished = DDPG(DDPGConfig(intervention_penalty=2.0), seed=0)
-    punished.remember(obs, -1.0, -0.5, following, False, replaced=1.5)
-    punished.remember(obs, 0.5, -0.25, following, False)  # kept: one transition
-    buffer = punished.buffer
-    assert buffer.count == 3
-    assert buffer.action[:3, 0].tolist() == [-1.0, 1.5, 0.5]
-    assert buffer.reward[:3, 0].tolist() == [-0.5, -2.5, -0.25]
-    np.testing.assert_array_equal(buffer.obs[1], buffer.obs[0])
-    np.testing.assert_array_equal(buffer.next_obs[1], buffer.next_obs[0])
-    plain = DDPG(DDPGConfig(), seed=0)  # the paper's learner: the executed action only
-    plain.remember(obs, -1.0, -0.5, following, False, replaced=1.5)
-    assert plain.buffer.count == 1

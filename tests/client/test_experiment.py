@@ -11,7 +11,6 @@ import sys
 import threading
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import httpx
 import numpy as np
@@ -427,6 +426,7 @@ def cli(*args: str) -> subprocess.CompletedProcess[str]:
     (("run", "--shield-config", '{"reviser": {"inspect": "every"}}'),
      "shield configuration: reviser.inspect"),
     (("run", "--reward", '{"penalty": 60}'), "reward: "),
+    (("run", "--ddpg", '{"learning_rate": 1}'), "ddpg: "),
 ])
 def test_user_errors_are_one_clear_line(tmp_path: Path, args: tuple[str, ...],
                                         message: str) -> None:
@@ -805,37 +805,3 @@ def test_the_experiment_entry_point_lists_and_refuses_an_unknown_name() -> None:
                              capture_output=True, text=True, timeout=30)
     assert unknown.returncode == 2 and "scripts/experiment lists them" in unknown.stderr
 
-
-class Remembering:
-    """An agent, environment and learner in one: the shield of its environment replaces the
-    proposal (1.0) by -1.0 on the first step and keeps it on the second."""
-
-    config = SimpleNamespace(update_first=False)
-
-    def __init__(self) -> None:
-        self.remembered: list[tuple[object, ...]] = []
-        self.t = 0
-
-    def act(self, obs: object) -> float:
-        return 1.0
-
-    def update(self) -> None:
-        pass
-
-    def step(self, action: object) -> tuple[object, float, bool, bool, dict[str, object]]:
-        self.t += 1
-        revised = self.t == 1
-        decision = {"revised": revised, "shadow": False, "verdict": "collision",
-                    "action": -1.0 if revised else 1.0}
-        return (np.zeros(4, np.float32), -1.0, self.t == 2, False,
-                {"speed_difference": 0.0, "shield": decision})
-
-    def remember(self, obs: object, executed: float, reward: float, next_obs: object,
-                 terminal: bool, replaced: float | None = None) -> None:
-        self.remembered.append((executed, replaced))
-
-
-def test_the_learner_hears_which_proposal_the_shield_replaced() -> None:
-    world = Remembering()
-    runner.play(world, world, np.zeros(4, np.float32), world)  # type: ignore[arg-type]
-    assert world.remembered == [(-1.0, 1.0), (1.0, None)]
