@@ -38,14 +38,10 @@ from app.core.tpm import DenseTransitions
 SEED = 0
 
 
-def build(n: int, seed: int = SEED) -> dict[str, Any]:
-    """The snapshot of a lazy-backend model of the paper's reviser with n states and a
-    learned history."""
-    config = ShieldConfig.paper(
-        reviser=ReviserConfig(method="paper", seed=seed), limits=LimitsConfig(max_states=n)
-    )
+def spread(config: ShieldConfig, n: int, rng: np.random.Generator) -> Shield:
+    """A shield of ``config`` whose n states are spread uniformly over the normalised
+    observation cube, every per-state table grown for them and nothing learned yet."""
     shield = Shield(config)
-    rng = np.random.default_rng(seed)
     centres = rng.uniform(0.0, 1.0, (n, 3))
     shield.clusterer = EvolvingClusterer.restore(config.clustering, 3, n, {
         "k": 10 * n, "beta": centres.sum(axis=0) * 10, "sigma": float((centres**2).sum()) * 10,
@@ -56,6 +52,17 @@ def build(n: int, seed: int = SEED) -> dict[str, Any]:
     })
     for _ in range(n):
         shield._add_state()
+    return shield
+
+
+def build(n: int, seed: int = SEED) -> dict[str, Any]:
+    """The snapshot of a lazy-backend model of the paper's reviser with n states and a
+    learned history."""
+    config = ShieldConfig.paper(
+        reviser=ReviserConfig(method="paper", seed=seed), limits=LimitsConfig(max_states=n)
+    )
+    rng = np.random.default_rng(seed)
+    shield = spread(config, n, rng)
     variances = shield.clusterer.variances()
     z = rng.uniform(0, 1, 3)
     prev = recognise(shield.clusterer.sq_distances(z), variances, config.limits.belief_top_k)

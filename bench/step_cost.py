@@ -23,15 +23,19 @@ from __future__ import annotations
 import argparse
 import platform
 import statistics
+import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from app.core import LimitsConfig, ReviserConfig, Shield, ShieldConfig
-from app.core.belief import recognise
-from app.core.clustering import EvolvingClusterer
-from app.core.config import RiskConfig
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from app.core import LimitsConfig, ReviserConfig, Shield, ShieldConfig  # noqa: E402
+from app.core.belief import recognise  # noqa: E402
+from app.core.config import RiskConfig  # noqa: E402
+from bench.core_step import spread  # noqa: E402
 
 SEED = 0
 CRITERIA = ("collision", "large_distance")
@@ -44,18 +48,8 @@ def build(n: int, seed: int = SEED) -> Shield:
         risk=RiskConfig(refresh_steps=10**9),
         limits=LimitsConfig(max_states=n),
     )
-    shield = Shield(config)
     rng = np.random.default_rng(seed)
-    centres = rng.uniform(0.0, 1.0, (n, 3))
-    shield.clusterer = EvolvingClusterer.restore(config.clustering, 3, n, {
-        "k": 10 * n, "beta": centres.sum(axis=0) * 10, "sigma": float((centres**2).sum()) * 10,
-        "capacity_hits": 0, "centres": centres,
-        "sq_norms": np.array([float(c @ c) for c in centres]),
-        "potentials": np.full(n, 0.5), "radii": np.full(n, 0.6 / n ** (1 / 3)),
-        "support": np.full(n, 10), "scatter": np.full(n, 0.01),
-    })
-    for _ in range(n):
-        shield._add_state()
+    shield = spread(config, n, rng)
     variances = shield.clusterer.variances()
     k = config.limits.belief_top_k
     z = rng.uniform(0, 1, 3)

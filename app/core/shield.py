@@ -198,6 +198,9 @@ class Shield:
         self._directions = [c.direction for c in cfg.criteria]
         self._safe_steps = risk.safe_steps(self._directions)
         self._names = tuple(c.name for c in cfg.criteria)
+        # the reviser's decision on a proposal: the risk reviser's (the default) or the paper's
+        self._decide = (self._decide_by_risk if cfg.reviser.method == "risk"
+                        else self._decide_by_flags)
         # the paper's a_max bounds a range symmetric about 0: the half-width, so that the
         # revision noise follows the width of any range, not where it lies
         self._a_max = (cfg.action.high - cfg.action.low) / 2
@@ -482,21 +485,6 @@ class Shield:
         mass = reviser.risk(pred, self.flags.flagged(), len(names))
         return {name: float(m) for name, m in zip(names, mass, strict=True)}
 
-    def _decide(
-        self,
-        step: StepInput,
-        belief: Belief,
-        recognised: int,
-        is_new: bool,
-        index: int,
-        rng: np.random.Generator,
-    ) -> Decision:
-        """The reviser's decision on the proposed action: the risk reviser's (the default) or
-        the paper's."""
-        if self.config.reviser.method == "risk":
-            return self._decide_by_risk(step, belief, recognised, is_new, index)
-        return self._decide_by_flags(step, belief, recognised, is_new, index, rng)
-
     def _decide_by_flags(
         self,
         step: StepInput,
@@ -560,9 +548,10 @@ class Shield:
         )
 
     def _decide_by_risk(self, step: StepInput, belief: Belief, recognised: int,
-                        is_new: bool, index: int) -> Decision:
+                        is_new: bool, index: int, rng: np.random.Generator) -> Decision:
         """The risk reviser (:mod:`app.core.risk`): keep the proposal unless its risk is over
-        the threshold and beyond the margin of the safest action; then the nearest allowed."""
+        the threshold and beyond the margin of the safest action; then the nearest allowed
+        (at its midpoint: no noise, so ``rng`` is not drawn from)."""
         cfg = self.config
         proposed = step.action
         assert proposed is not None
