@@ -13,7 +13,6 @@ import logging
 import re
 import threading
 from collections.abc import Callable, Iterable, Sequence
-from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -338,13 +337,13 @@ class ModelRegistry:
         """
         models = {name: self.get(name) for name in dict.fromkeys(n for n, _ in steps)}
         due: list[Model] = []  # models whose snapshot this call takes, their write lock held
+        held: list[Model] = []
         try:
-            with ExitStack() as stack:
+            try:
                 for name in sorted(models):  # a fixed order: no deadlock between batches
-                    lock = models[name].lock
-                    if not lock.acquire(blocking=blocking):
+                    if not models[name].lock.acquire(blocking=blocking):
                         return None
-                    stack.callback(lock.release)
+                    held.append(models[name])
                     if self._models.get(name) is not models[name]:  # replaced or deleted
                         raise UnknownModel(f"model {name!r} was replaced or deleted; send "
                                            "again", field="name")
@@ -362,6 +361,9 @@ class ModelRegistry:
                             and model.snapshotting.acquire(blocking=False)):  # else: next step
                         due.append(model)
                         taken.append(self._take(model))
+            finally:
+                for model in held:
+                    model.lock.release()
             for model, data in zip(due, taken, strict=True):  # with the models' locks released
                 model.store.write_snapshot(codec.to_npz(data))  # type: ignore[union-attr]
         finally:
@@ -390,16 +392,18 @@ class ModelRegistry:
             watcher(event)
 
     def _journal(self, models: dict[str, Model], steps: Iterable[tuple[str, Step]]) -> None:
-        grouped: dict[str, list[dict[str, Any]]] = {}
+        """Append the learning steps to their models' journals (models with a store) and
+        count them towards the next snapshot."""
+        grouped: dict[str, list[Step]] = {}
         for name, step in steps:
             if step.learn:
-                grouped.setdefault(name, []).append(step.journal())
-        for name, records in grouped.items():
+                grouped.setdefault(name, []).append(step)
+        for name, learned in grouped.items():
             model = models[name]
             if model.store is not None:
-                version = model.shield.counters.model_version + len(records)
-                model.store.append({"v": version, "steps": records})
-            model.since_snapshot += len(records)
+                version = model.shield.counters.model_version + len(learned)
+                model.store.append({"v": version, "steps": [s.journal() for s in learned]})
+            model.since_snapshot += len(learned)
 
 
 def _validate(shield: Shield, step: Step, index: int, batch: bool) -> StepInput:
