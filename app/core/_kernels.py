@@ -1,9 +1,9 @@
 """Arithmetic shared by the compiled kernels: sums in numpy's own order.
 
 The core's per-step path runs as numba kernels (``@njit(cache=True)``) on preallocated arrays.
-Where a kernel sums what numpy used to sum, it sums in numpy's order (pairwise, eight
-accumulators), so that the compiled core gives the same numbers, bit for bit, as the plain
-numpy reading of the same equations that the tests keep beside it.
+Where a kernel sums what a numpy expression of the same equation would sum, it sums in numpy's
+order (pairwise, eight accumulators), so that the compiled core gives the same numbers, bit for
+bit, as the plain numpy readings of its equations that the tests keep beside it.
 """
 
 from __future__ import annotations
