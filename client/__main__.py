@@ -233,7 +233,8 @@ def service(data_dir: Path) -> Iterator[str]:
          "--fsync", "never", "--log-level", "warning"], stdout=log, stderr=subprocess.STDOUT,
         preexec_fn=partial(parallel.die_with_parent, os.getpid()))
     try:
-        for _ in range(300):
+        deadline = time.monotonic() + 120  # a first start compiles the core: about 15 s here
+        while True:
             if process.poll() is not None:
                 fail(f"the shield service exited; see {log.name}")
             try:
@@ -241,6 +242,8 @@ def service(data_dir: Path) -> Iterator[str]:
                     break
             except httpx.TransportError:
                 time.sleep(0.1)
+            if time.monotonic() > deadline:
+                fail(f"the shield service did not answer within 120 s; see {log.name}")
         yield url
     finally:
         process.terminate()

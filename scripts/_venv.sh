@@ -12,6 +12,7 @@ if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
          "client and dev extras, torch 2.13.0 (CPU) among them; a few minutes the first time" >&2
     .venv/bin/python -m pip install --quiet --upgrade pip
     .venv/bin/python -m pip install --quiet --quiet -e ".[service,client,dev]"
+    .venv/bin/python -m app warm >&2  # compile the core's kernels into their cache now
     echo "$want" >"$stamp"
     echo ".venv is ready" >&2
 fi
