@@ -384,20 +384,13 @@ def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
     cleared again, so that finding the entries costs O(k W) whatever n is.
     """
     width = vals.shape[1]
-    needed = 0
-    for i in range(rows.shape[0]):  # first, without changing anything: is there room?
-        row = rows[i]
-        count = nnz[row]
-        for s in range(count):
-            slots[stored_cols[row, s]] = s + 1
-        for j in range(cols.shape[0]):
-            if slots[cols[j]] == 0:
-                count += 1
-        for s in range(nnz[row]):
-            slots[stored_cols[row, s]] = 0
-        needed = max(needed, count)
-    if needed > width:
-        return needed
+    fullest = 0
+    for i in range(rows.shape[0]):
+        fullest = max(fullest, nnz[rows[i]])
+    if fullest + cols.shape[0] > width:  # first, without changing anything: is there room?
+        needed = _width_needed(rows, cols, nnz, stored_cols, slots)
+        if needed > width:
+            return needed
     step = log_decay[a] + math.log1p(-lr)
     log_decay[a] = step
     base = -step  # the touched rows' new offset
@@ -430,3 +423,23 @@ def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
             slots[stored_cols[row, s]] = 0
         nnz[row] = count
     return 0
+
+
+@njit(cache=True)
+def _width_needed(rows: IntArray, cols: IntArray, nnz: IntArray, stored_cols: ColArray,
+                  slots: IntArray) -> int:
+    """The most entries a touched row will hold once ``cols`` are in it (``slots`` zeroed
+    before and after, as in :func:`_learn`)."""
+    needed = 0
+    for i in range(rows.shape[0]):
+        row = rows[i]
+        count = nnz[row]
+        for s in range(count):
+            slots[stored_cols[row, s]] = s + 1
+        for j in range(cols.shape[0]):
+            if slots[cols[j]] == 0:
+                count += 1
+        for s in range(nnz[row]):
+            slots[stored_cols[row, s]] = 0
+        needed = max(needed, count)
+    return needed
