@@ -224,6 +224,8 @@ def test_without_a_data_directory_the_server_says_so(tmp_path: Path) -> None:
         process.terminate()
         output = process.communicate(timeout=10)[0].decode()
     assert "models live in memory only" in output
+    assert "loading the compiled core" in output  # said before it listens ...
+    assert "compiled core loaded from its cache" in output or "kernels in" in output
 
 
 def test_the_container_command_runs_outside_docker(tmp_path: Path) -> None:
