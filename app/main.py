@@ -28,12 +28,14 @@ def default_config(settings: Settings) -> ShieldConfig:
     return ShieldConfig.from_dict(json.loads(settings.config.read_text()))
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
-    """Build the service; models load (journals replay) when the app starts."""
+def create_app(settings: Settings | None = None, *, create_default: bool = True) -> FastAPI:
+    """Build the service; models load (journals replay) when the app starts. A shard of a
+    cluster (:mod:`app.cluster`) passes ``create_default=False``: the 'default' model lives on
+    the one shard that owns its name."""
     settings = settings or get_settings()
     registry = ModelRegistry(settings.data_dir, settings.fsync, settings.snapshot_every,
                              default_config(settings), max_models=settings.max_models,
-                             max_states=settings.max_states)
+                             max_states=settings.max_states, create_default=create_default)
 
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:

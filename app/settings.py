@@ -61,6 +61,26 @@ class Settings(BaseSettings):
         return value
 
 
+class ClusterSettings(Settings):
+    """``python -m app serve-ray``: the service sharded on Ray Serve (:mod:`app.cluster`)."""
+
+    model_config = SettingsConfigDict(
+        env_prefix="EFSM_",
+        cli_kebab_case=True,
+        cli_prog_name="python -m app serve-ray",
+        cli_implicit_flags=True,
+    )
+
+    shards: int = Field(2, ge=1, le=1024, description="Shards; each owns the models whose "
+                        "names it wins, and keeps its files under <data-dir>/shards/<i>.")
+    ray_address: str | None = Field(
+        None, description="An existing Ray cluster ('auto', or ray://host:port); without it a "
+        "local Ray instance starts and stops with the service.")
+    ray_cpus: int | None = Field(None, ge=1, description="CPUs of the local Ray instance.")
+    ray_object_store_mb: int = Field(256, ge=64, description="Object store of the local Ray "
+                                     "instance (MiB).")
+
+
 @lru_cache
 def get_settings() -> Settings:
     """The settings of this process (tests build their own :class:`Settings`)."""

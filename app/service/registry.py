@@ -108,13 +108,14 @@ class ModelRegistry:
     def __init__(self, data_dir: Path | None = None, fsync: Fsync = "interval",
                  snapshot_every: int = 50_000,
                  default_config: ShieldConfig | None = None, *, max_models: int = 1000,
-                 max_states: int = 100_000) -> None:
+                 max_states: int = 100_000, create_default: bool = True) -> None:
         self.data_dir = data_dir
         self.max_models = max_models
         self.max_states = max_states
         self.fsync = fsync
         self.snapshot_every = snapshot_every
         self.default_config = default_config or ShieldConfig()
+        self.create_default = create_default  # a shard of a cluster leaves it to its owner
         self._models: dict[str, Model] = {}
         self.quarantined: dict[str, str] = {}  # name -> why its files could not be loaded
         self._lock = threading.Lock()  # the name -> model map
@@ -125,7 +126,8 @@ class ModelRegistry:
     # --- life cycle -----------------------------------------------------------------------
 
     def open(self) -> None:
-        """Load every stored model (snapshot + journal replay) and make sure 'default' exists.
+        """Load every stored model (snapshot + journal replay) and make sure 'default' exists
+        (unless ``create_default`` is off).
 
         A model whose files are damaged is set aside (:attr:`quarantined`, logged as an
         error): it answers :class:`ModelQuarantined` while every other model serves, and no
@@ -149,8 +151,8 @@ class ModelRegistry:
                 self._syncer = threading.Thread(target=self._sync_loop, name="journal-sync",
                                                  daemon=True)
                 self._syncer.start()
-        if DEFAULT_MODEL not in self._models and DEFAULT_MODEL not in self.quarantined:
-            self.create(DEFAULT_MODEL, self.default_config)
+        if self.create_default:
+            self.ensure_default()
         self.ready = True
 
     def close(self) -> None:
@@ -165,6 +167,16 @@ class ModelRegistry:
                     if model.since_snapshot:
                         self._snapshot(model)
                     model.store.close()
+
+    def ensure_default(self) -> None:
+        """Create the 'default' model with the default configuration if it is missing."""
+        with self._lock:
+            missing = DEFAULT_MODEL not in self._models and DEFAULT_MODEL not in self.quarantined
+        if missing:
+            try:
+                self.create(DEFAULT_MODEL, self.default_config)
+            except ModelExists:
+                pass  # created meanwhile
 
     def _sync_loop(self) -> None:
         while not self._stop.wait(1.0):  # fsync=interval: at most one second at risk

@@ -5,8 +5,9 @@ from __future__ import annotations
 from collections import Counter
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Path, Request, WebSocket
+from fastapi import APIRouter, Depends, Path, Request
 from fastapi.responses import Response
+from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
 
 from app.api.convert import to_json, to_step
@@ -40,8 +41,9 @@ async def step_one(registry: ModelRegistry, name: str, step: Step) -> CoreDecisi
     return decision
 
 
-def count(request: Request | WebSocket, name: str, decisions: list[CoreDecision]) -> None:
-    counter = request.app.state.metrics.decisions
+def count(app: Starlette, name: str, decisions: list[CoreDecision]) -> None:
+    """Count the decisions per reason in the app's metrics."""
+    counter = app.state.metrics.decisions
     for reason, n in Counter(d.reason for d in decisions).items():
         counter.labels(name, reason).inc(n)
 
@@ -55,7 +57,7 @@ async def revise_model(name: NamePath, body: ReviseRequest, request: Request) ->
     """Answer one proposed action of a stream with the decision record."""
     check_token(request)
     decision = await step_one(request.app.state.registry, name, to_step(body))
-    count(request, name, [decision])
+    count(request.app, name, [decision])
     return json_response(decision)
 
 
@@ -77,7 +79,7 @@ def revise_batch(name: NamePath, body: BatchRequest, registry: RegistryDep,
     """Steps of one model, applied in order; one bad step rejects the whole batch."""
     check_size(len(body.steps), settings.max_batch)
     decisions = registry.step_batch(name, [to_step(s) for s in body.steps])
-    count(request, name, decisions)
+    count(request.app, name, decisions)
     return json_response({"decisions": decisions})
 
 
@@ -89,5 +91,5 @@ def revise_across(body: ModelBatchRequest, registry: RegistryDep, settings: Sett
     decisions = registry.step_many([(s.model, to_step(s)) for s in body.steps])
     assert decisions is not None
     for s, d in zip(body.steps, decisions, strict=True):
-        count(request, s.model, [d])
+        count(request.app, s.model, [d])
     return json_response({"decisions": decisions})

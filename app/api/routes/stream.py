@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Awaitable, Callable
+from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
+from starlette.applications import Starlette
 
 from app.api.auth import given_token, token_ok
 from app.api.convert import to_json, to_step
@@ -31,10 +34,23 @@ async def model_stream(websocket: WebSocket, name: NamePath) -> None:
     try:
         registry.get(name)
     except ShieldError as error:
-        await websocket.send_text(json.dumps(error_body(error.code, error.message, "name")))
-        await websocket.close(code=POLICY_VIOLATION)
+        await refuse(websocket, error_body(error.code, error.message, "name"))
         return
-    limit = app.state.settings.max_body_bytes  # a frame is held to the body limit of HTTP
+    await serve_frames(websocket, app.state.settings.max_body_bytes,
+                       lambda text: answer(app, registry, name, text))
+
+
+async def refuse(websocket: WebSocket, body: dict[str, Any]) -> None:
+    """Refuse an accepted stream: one error frame, then the close."""
+    await websocket.send_text(json.dumps(body))
+    await websocket.close(code=POLICY_VIOLATION)
+
+
+async def serve_frames(websocket: WebSocket, limit: int,
+                       reply: Callable[[str], Awaitable[str]]) -> None:
+    """Answer each text frame with ``reply(text)``, in order, until the client leaves; a
+    frame that is not text, or over ``limit`` bytes (the body limit of HTTP), gets an error
+    frame and the stream goes on."""
     while True:
         try:
             message = await websocket.receive()
@@ -51,10 +67,11 @@ async def model_stream(websocket: WebSocket, name: NamePath) -> None:
             await websocket.send_text(json.dumps(error_body(
                 "too_large", f"frame over {limit} bytes")))
             continue
-        await websocket.send_text(await answer(websocket, registry, name, text))
+        await websocket.send_text(await reply(text))
 
 
-async def answer(websocket: WebSocket, registry: ModelRegistry, name: str, text: str) -> str:
+async def answer(app: Starlette, registry: ModelRegistry, name: str, text: str) -> str:
+    """The reply to one frame: the decision record, or the error body of a bad step."""
     try:
         body = ReviseRequest.model_validate_json(text)
         decision = await step_one(registry, name, to_step(body))
@@ -65,7 +82,7 @@ async def answer(websocket: WebSocket, registry: ModelRegistry, name: str, text:
         return json.dumps(error_body(code, first["msg"], field))
     except ShieldError as error:
         return json.dumps(error_body(error.code, error.message, error.field))
-    count(websocket, name, [decision])
+    count(app, name, [decision])
     return to_json(decision).decode()
 
 

@@ -1,0 +1,169 @@
+"""What a sharded service adds to the contract, in process: each model on its owner shard,
+batches within a shard, moves that lose no step, merged metrics, a shard that does not
+answer."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+from typing import Any
+
+from fastapi.testclient import TestClient
+
+from app.cluster.ingress import Gates, ingress_app, merge_metrics
+from app.cluster.placement import hashed_owner
+from app.cluster.shard import ShardServer
+from app.main import create_app
+from app.settings import Settings
+from tests.cluster.sharded import sharded_client
+
+NAMES = [f"car-{i}" for i in range(8)]
+
+
+def step(t: int, done: bool = False) -> dict[str, Any]:
+    return {"observation": [10.0 + t % 7, 12.0 - t % 5, 9.0], "action": 0.5 - 0.1 * (t % 4),
+            "done": done, "event": "collision" if done else None}
+
+
+def servers(client: TestClient) -> list[ShardServer]:
+    shards: list[ShardServer] = client.app.state.shards  # type: ignore[attr-defined]
+    return shards
+
+
+def test_each_model_lives_on_its_owner_shard_and_is_listed_once() -> None:
+    with sharded_client(Settings(), n_shards=3) as c:
+        for name in NAMES:
+            assert c.post("/models", json={"name": name}).status_code == 201
+        for index, server in enumerate(servers(c)):
+            expected = {n for n in [*NAMES, "default"] if hashed_owner(n, 3) == index}
+            assert set(server.registry.names()) == expected
+        assert [m["name"] for m in c.get("/models").json()["models"]] == sorted(
+            [*NAMES, "default"])
+        assert c.post("/models", json={"name": NAMES[0]}).json()["error"]["code"] == "model_exists"
+
+
+def test_a_batch_across_models_of_several_shards_is_refused_and_changes_nothing() -> None:
+    with sharded_client(Settings(), n_shards=2) as c:
+        a, b = (next(n for n in NAMES if hashed_owner(n, 2) == i) for i in (0, 1))
+        together = next(n for n in NAMES if n != a and hashed_owner(n, 2) == 0)
+        for name in (a, b, together):
+            c.post("/models", json={"name": name})
+        r = c.post("/revise/batch", json={"steps": [{**step(0), "model": a},
+                                                    {**step(1), "model": b}]})
+        assert r.status_code == 422
+        assert r.json()["error"] == {"code": "models_on_several_shards", "field": "steps",
+                                     "message": r.json()["error"]["message"]}
+        assert all(m["model_version"] == 0 for m in c.get("/models").json()["models"])
+        r = c.post("/revise/batch", json={"steps": [{**step(0), "model": a},
+                                                    {**step(1), "model": together}]})
+        assert r.status_code == 200 and len(r.json()["decisions"]) == 2
+
+
+def test_a_moved_model_goes_on_deciding_as_if_it_had_never_moved(tmp_path: Path) -> None:
+    plain = TestClient(create_app(Settings()))
+    with plain, sharded_client(Settings(data_dir=tmp_path), n_shards=2) as c:
+        name = NAMES[0]
+        plain.post("/models", json={"name": name})
+        c.post("/models", json={"name": name})
+        home = hashed_owner(name, 2)
+        decisions, expected = [], []
+        for t in range(60):
+            if t in (20, 40):  # there and back again
+                to = 1 - home if t == 20 else home
+                r = c.post("/shards/move", json={"model": name, "to": to})
+                assert r.status_code == 200 and r.json()["to"] == to
+                assert name in servers(c)[to].registry.names()
+                assert name not in servers(c)[1 - to].registry.names()
+            body = step(t, done=t % 15 == 14)
+            decisions.append(c.post(f"/models/{name}/revise", json=body).json())
+            expected.append(plain.post(f"/models/{name}/revise", json=body).json())
+        assert decisions == expected
+        assert c.get("/shards").json()["moved"] == {}
+        c.post("/shards/move", json={"model": name, "to": 1 - home})
+        assert c.get("/shards").json()["moved"] == {name: 1 - home}
+    with sharded_client(Settings(data_dir=tmp_path), n_shards=2) as c:  # the cluster restarts
+        r = c.post(f"/models/{name}/revise", json=step(60))
+        assert r.json() == plain.post(f"/models/{name}/revise", json=step(60)).json()
+        assert c.delete(f"/models/{name}").status_code == 204
+        assert c.get("/shards").json()["moved"] == {}  # a new model of that name goes home
+
+
+def test_bad_moves_are_refused_and_change_nothing() -> None:
+    with sharded_client(Settings(token="s3cret"), n_shards=2) as c:
+        auth = {"Authorization": "Bearer s3cret"}
+        assert c.post("/shards/move", json={"model": "default", "to": 0}).status_code == 401
+        r = c.post("/shards/move", json={"model": "default", "to": 2}, headers=auth)
+        assert (r.status_code, r.json()["error"]["field"]) == (422, "to")
+        r = c.post("/shards/move", json={"model": "Bad", "to": 0}, headers=auth)
+        assert (r.status_code, r.json()["error"]["code"]) == (422, "invalid_name")
+        r = c.post("/shards/move", json={"model": "ghost", "to": 0}, headers=auth)
+        assert (r.status_code, r.json()["error"]["code"]) == (404, "unknown_model")
+        assert c.get("/shards", headers=auth).json()["moved"] == {}
+
+
+def test_a_move_waits_for_the_steps_in_flight_and_holds_the_next() -> None:
+    async def scenario() -> list[str]:
+        gates, order = Gates(), []
+
+        async def request(label: str, delay: float) -> None:
+            async with gates.use("m"):
+                await asyncio.sleep(delay)
+                order.append(label)
+
+        async def move() -> None:
+            async with gates.exclusive("m"):
+                order.append("moved")
+
+        first = asyncio.create_task(request("in flight", 0.05))
+        await asyncio.sleep(0.01)
+        moving = asyncio.create_task(move())
+        await asyncio.sleep(0.01)
+        after = asyncio.create_task(request("after", 0.0))
+        other = asyncio.create_task(request_other(gates, order))
+        await asyncio.gather(first, moving, after, other)
+        return order
+
+    async def request_other(gates: Gates, order: list[str]) -> None:
+        async with gates.use("n"):
+            order.append("other model")
+
+    assert asyncio.run(scenario()) == ["other model", "in flight", "moved", "after"]
+
+
+def test_metrics_are_merged_with_a_shard_label() -> None:
+    with sharded_client(Settings(), n_shards=2) as c:
+        c.post("/revise", json=step(0))
+        text = c.get("/metrics").text
+        owner = hashed_owner("default", 2)
+        assert (f'efsm_http_requests_total{{shard="{owner}",method="POST",route="/revise",'
+                'status="200"} 1.0') in text
+        assert text.count("# TYPE efsm_http_requests_total counter") == 1
+    merged = merge_metrics(["# TYPE up gauge\nup 1.0\n", "# TYPE up gauge\nup{job=\"x\"} 0.0\n"])
+    assert merged == '# TYPE up gauge\nup{shard="0"} 1.0\nup{shard="1",job="x"} 0.0\n'
+
+
+def test_a_shard_that_does_not_answer_is_a_clear_503_and_others_serve() -> None:
+    settings = Settings()
+    live = [ShardServer(settings, i) for i in range(2)]
+    down = 1 - hashed_owner("default", 2)
+
+    async def call(shard: int, method: str, *args: Any) -> Any:
+        if shard == down:
+            raise ConnectionError("the replica died")
+        return await getattr(live[shard], method)(*args)
+
+    with TestClient(ingress_app(settings, 2, call)) as c:
+        name = next(n for n in NAMES if hashed_owner(n, 2) == down)
+        r = c.post(f"/models/{name}/revise", json=step(0))
+        assert r.status_code == 503 and r.json()["error"]["code"] == "shard_unavailable"
+        assert c.get("/readyz").status_code == 503
+        assert c.post("/revise", json=step(0)).status_code == 200
+        with c.websocket_connect(f"/models/{name}/ws") as ws:
+            assert json.loads(ws.receive_text())["error"]["code"] == "shard_unavailable"
+
+
+def test_the_live_event_feed_is_refused_with_a_reason() -> None:
+    with sharded_client(Settings()) as c:
+        r = c.get("/models/default/events")
+        assert r.status_code == 404 and "live event feed" in r.json()["error"]["message"]
