@@ -1,5 +1,6 @@
 """The dependency rule: app.core <- app.service <- app.api <- app.main; app never imports
-client; nothing of the service imports torch (its container has none)."""
+client; nothing of the service imports torch (its container has none), and only the Ray
+deployment imports Ray (an optional extra)."""
 
 from __future__ import annotations
 
@@ -31,6 +32,11 @@ def test_service_layer_knows_nothing_of_http() -> None:
     assert not {m for m in loaded if m.startswith("app.api")}
 
 
-@pytest.mark.parametrize("module", ["app.main", "app.__main__"])
+@pytest.mark.parametrize("module", ["app.main", "app.__main__", "app.cluster.ray_serve"])
 def test_the_service_imports_neither_torch_nor_the_client(module: str) -> None:
     assert not top(imported_after(module)) & {"torch", "client"}
+
+
+def test_ray_is_loaded_only_by_the_ray_deployment() -> None:
+    assert "ray" not in top(imported_after("app.__main__"))
+    assert "ray" not in top(imported_after("app.cluster.ingress"))

@@ -70,14 +70,14 @@ def run(settings: ClusterSettings) -> None:
     directory written for another number of shards is refused first
     (:class:`~app.cluster.placement.PlacementError`)."""
     Placement(settings.shards, placement_path(settings))  # a wrong shard count fails here
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
     if settings.ray_address is None:
         ray.init(include_dashboard=False, num_cpus=settings.ray_cpus,
                  object_store_memory=settings.ray_object_store_mb * 2**20)
     else:
         ray.init(address=settings.ray_address)
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):  # after ray.init, which sets its own
+        signal.signal(signum, lambda *_: stop.set())
     try:
         serve.start(http_options={"host": settings.host, "port": settings.port})
         serve.run(application(settings, settings.shards), name=APP_NAME, route_prefix="/")
