@@ -73,6 +73,8 @@ class ClusterSettings(Settings):
 
     shards: int = Field(2, ge=1, le=1024, description="Shards; each owns the models whose "
                         "names it wins, and keeps its files under <data-dir>/shards/<i>.")
+    ingresses: int = Field(1, ge=1, le=1024, description="Ingress replicas (each takes any "
+                           "request; Serve spreads requests over them).")
     ray_address: str | None = Field(
         None, description="An existing Ray cluster ('auto', or ray://host:port); without it a "
         "local Ray instance starts and stops with the service.")

@@ -1,8 +1,9 @@
 """The sharded service on Ray Serve against the plain service, same machine, same run.
 
-Three servers, one after the other: ``python -m app serve`` (one process), and ``python -m
-app serve-ray`` with 1 and with 2 shards (a local Ray instance). For each, on fresh models of
-the default configuration (each step learned and decided on):
+Four servers, one after the other: ``python -m app serve`` (one process), and ``python -m
+app serve-ray`` (a local Ray instance) with 1 shard, 2 shards, and 2 shards behind 2
+ingresses. For each, on fresh models of the default configuration (each step learned and
+decided on):
 
 * the latency of one step (``POST /models/{name}/revise``, one client, one request at a time);
 * steps a second with ``--clients`` clients at once, each stepping its own model, one step a
@@ -172,7 +173,10 @@ def main() -> None:
                    "ray, 1 shard": [*python, "serve-ray", "--shards", "1",
                                     "--data-dir", f"{scratch}/one"],
                    "ray, 2 shards": [*python, "serve-ray", "--shards", "2",
-                                     "--data-dir", f"{scratch}/two"]}
+                                     "--data-dir", f"{scratch}/two"],
+                   "ray, 2 shards, 2 ingresses": [*python, "serve-ray", "--shards", "2",
+                                                  "--ingresses", "2",
+                                                  "--data-dir", f"{scratch}/three"]}
         for label, command in servers.items():
             results[label] = measure(command, args)
             print(label, {k: round(v, 2) for k, v in results[label].items()}, flush=True)

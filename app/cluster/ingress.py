@@ -1,14 +1,16 @@
 """The ingress of a sharded service: the plain service's HTTP and WebSocket contract, each
 request handed to the shard that owns its model.
 
-A request about one model (``/models/{name}/...``, or ``/revise``, ``/model`` and ``/ws`` for
-'default') goes to the model's owner (:class:`~app.cluster.placement.Placement`), so a model has
-exactly one writer and its steps keep their order. ``GET /models``, ``/readyz`` and
-``/metrics`` ask every shard. Two routes are the cluster's own: ``GET /shards`` (where each
-shard runs, what it holds) and ``POST /shards/move`` (a model to another shard: its steps wait,
-it is snapshotted, restored on the target and deleted from the source, and its steps resume
-there). Shards are reached through ``call(shard, method, *args)``, a coroutine: Ray Serve's
-handles in :mod:`app.cluster.ray_serve`, the objects themselves in tests.
+A request about one model goes to the model's shard: its home shard by name
+(:func:`~app.cluster.placement.hashed_owner`), or where the ingress learned it moved. A shard
+that gave the model away answers :class:`~app.cluster.shard.Moved`; the ingress remembers the
+new shard and sends the request there. So an ingress holds nothing that others must share, and
+Serve can run as many as the traffic needs. ``GET /models``, ``/readyz`` and ``/metrics`` ask
+every shard. Two routes are the cluster's own: ``GET /shards`` (where each shard runs, what it
+holds and gave away) and ``POST /shards/move`` (a model to another shard, handed over by its
+shard without losing a step). Shards are reached through ``call(shard, method, *args)``, a
+coroutine: Ray Serve's handles in :mod:`app.cluster.ray_serve`, the objects themselves in
+tests.
 """
 
 from __future__ import annotations
@@ -16,9 +18,8 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-from collections import Counter
-from collections.abc import AsyncIterator, Awaitable, Callable
-from contextlib import AsyncExitStack, asynccontextmanager
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI, Request, WebSocket
@@ -34,15 +35,14 @@ from app.api.routes.revise import NamePath
 from app.api.routes.stream import refuse, serve_frames
 from app.api.schemas import ModelName
 from app.cluster import asgi
-from app.cluster.placement import Placement, placement_path
+from app.cluster.placement import Moves, hashed_owner
+from app.cluster.routing import named
+from app.cluster.shard import Moved, ShardCall
 from app.core import ShieldError
 from app.service.registry import DEFAULT_MODEL
 from app.settings import Settings
 
 log = logging.getLogger("app.cluster")
-
-ShardCall = Callable[..., Awaitable[Any]]
-"""``call(shard, method, *args)``: run a :class:`~app.cluster.shard.ShardServer` method."""
 
 METHODS = ["GET", "POST", "PUT", "DELETE", "PATCH", "HEAD", "OPTIONS"]
 
@@ -75,52 +75,6 @@ class MoveRequest(BaseModel):
     to: int = Field(ge=0, description="Index of the target shard.")
 
 
-class Gates:
-    """Per model: the requests in flight, and a move that waits for them and holds new ones."""
-
-    def __init__(self) -> None:
-        self._changed = asyncio.Condition()
-        self._busy: Counter[str] = Counter()
-        self._moving: set[str] = set()
-
-    @asynccontextmanager
-    async def use(self, name: str) -> AsyncIterator[None]:
-        """Hold ``name`` where it is while a request about it runs."""
-        async with self._changed:
-            await self._changed.wait_for(lambda: name not in self._moving)
-            self._busy[name] += 1
-        try:
-            yield
-        finally:
-            async with self._changed:
-                self._busy[name] -= 1
-                self._changed.notify_all()
-
-    @asynccontextmanager
-    async def exclusive(self, name: str) -> AsyncIterator[None]:
-        """Wait until nothing about ``name`` runs, and hold new requests until the end."""
-        async with self._changed:
-            await self._changed.wait_for(lambda: name not in self._moving)
-            self._moving.add(name)
-            await self._changed.wait_for(lambda: self._busy[name] == 0)
-        try:
-            yield
-        finally:
-            async with self._changed:
-                self._moving.discard(name)
-                self._changed.notify_all()
-
-
-def subject(path: str) -> str | None:
-    """The model a request of the plain contract is about (None: any shard answers)."""
-    parts = path.strip("/").split("/")
-    if parts[0] == "models" and len(parts) >= 2 and parts[1]:
-        return parts[1]
-    if path in ("/revise", "/model"):
-        return DEFAULT_MODEL
-    return None
-
-
 def merge_metrics(texts: list[str]) -> str:
     """The shards' Prometheus texts as one, each sample labelled with its ``shard``."""
     families: dict[str, list[str]] = {}
@@ -147,10 +101,13 @@ def _labelled(sample: str, shard: int) -> str:
 
 
 def ingress_app(settings: Settings, n_shards: int, call: ShardCall) -> FastAPI:
-    """The ingress over ``n_shards`` shards reached through ``call``."""
-    placement = Placement(n_shards, placement_path(settings))
-    gates = Gates()
+    """An ingress over ``n_shards`` shards reached through ``call``."""
+    learned = Moves()  # where this ingress saw models go; the shards hold the truth
     limit = max(settings.max_body_bytes, settings.max_snapshot_bytes)
+
+    def owner(name: str) -> int:
+        moved = learned.get(name)
+        return hashed_owner(name, n_shards) if moved is None else moved
 
     async def on(shard: int, method: str, *args: Any) -> Any:
         try:
@@ -160,20 +117,35 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall) -> FastAPI:
             raise ShardUnavailable(f"shard {shard} did not answer ({type(error).__name__}); "
                                    "it restarts from its files: send again") from error
 
-    async def forward(shard: int, request: asgi.Request) -> asgi.Reply:
-        reply: asgi.Reply = await on(shard, "request", request)
-        return reply
+    async def routed(names: list[str], method: str, *args: Any) -> Any:
+        """``method`` on the shard of ``names``, following the moves the shards report."""
+        for _ in range(n_shards + 2):
+            owners = {owner(name) for name in names}
+            if len(owners) > 1:
+                raise SeveralShards(
+                    "a batch across models must name models of one shard (see GET /shards; "
+                    "POST /shards/move puts models together)", field="steps")
+            result = await on(owners.pop() if owners else 0, method, *args)
+            if not isinstance(result, Moved):
+                return result
+            if result.owner == hashed_owner(result.name, n_shards):
+                learned.discard(result.name)
+            else:
+                learned.set(result.name, result.owner)
+        raise ShardUnavailable(f"{names} kept moving while the request was sent: send again")
+
+    async def every(method: str, *args: Any) -> list[Any]:
+        return list(await asyncio.gather(*(on(i, method, *args) for i in range(n_shards))))
 
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
-        await on(placement.owner(DEFAULT_MODEL), "ensure_default")
+        await routed([DEFAULT_MODEL], "ensure_default")
         log.info("ingress over %d shards", n_shards)
         yield
 
     api = FastAPI(title="e-FSM safety shield (sharded)", version=app.__version__,
                   lifespan=lifespan)
     api.state.settings = settings
-    api.state.placement = placement
     errors.install(api)
 
     @api.get("/healthz")
@@ -185,7 +157,7 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall) -> FastAPI:
     async def readyz() -> JSONResponse:
         """Every shard has loaded its models (no token needed)."""
         try:
-            infos = await asyncio.gather(*(on(i, "info") for i in range(n_shards)))
+            infos = await every("info")
         except ShardUnavailable as error:
             return JSONResponse({"status": "loading", "reason": error.message}, 503)
         ready = all(info["ready"] for info in infos)
@@ -196,52 +168,36 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall) -> FastAPI:
 
     @api.get("/shards")
     async def shards(request: Request) -> dict[str, Any]:
-        """Each shard: where it runs and the models it owns; and the models moved."""
+        """Each shard: where it runs, the models it holds and those it gave away."""
         check_token(request)
-        infos = await asyncio.gather(*(on(i, "info") for i in range(n_shards)))
-        return {"shards": infos, "moved": placement.moved}
+        return {"shards": await every("info")}
 
     @api.post("/shards/move")
     async def move(body: MoveRequest, request: Request) -> Response:
         """Move a model to another shard without losing a step: its requests wait, it is
-        snapshotted, restored on the target, deleted from the source, and they resume."""
+        snapshotted, restored on the target and deleted from the source, and they resume."""
         check_token(request)
         if body.to >= n_shards:
             raise UnknownShard(f"the cluster has shards 0 to {n_shards - 1}", field="to")
-        name, auth = body.model, _auth(request)
-        async with gates.exclusive(name):
-            source = placement.owner(name)
-            if source != body.to:
-                snapshot = await forward(source, asgi.Request(
-                    "GET", f"/models/{name}", b"format=npz", auth))
-                if snapshot.status != 200:
-                    return _response(snapshot)
-                restored = await forward(body.to, asgi.Request(
-                    "PUT", f"/models/{name}", b"",
-                    (*auth, (b"content-type", b"application/x-npz")), snapshot.body))
-                if restored.status != 200:
-                    return _response(restored)
-                placement.move(name, body.to)
-                await forward(source, asgi.Request("DELETE", f"/models/{name}", b"", auth))
-                log.info("model %r moved from shard %d to shard %d", name, source, body.to)
-        return JSONResponse({"model": name, "from": source, "to": body.to})
+        reply: asgi.Reply = await routed([body.model], "move", body.model, body.to)
+        if reply.status == 200:
+            learned.set(body.model, body.to)
+        return _response(reply)
 
     @api.get("/models")
     async def list_models(request: Request) -> Response:
         """Every model of every shard, by name."""
-        replies = await asyncio.gather(*(forward(i, _copy(request, b"")) for i in range(n_shards)))
+        replies = await every("request", _copy(request, b""))
         for reply in replies:
             if reply.status != 200:
                 return _response(reply)
-        models = [model for i, reply in enumerate(replies)
-                  for model in json.loads(reply.body)["models"]
-                  if placement.owner(model["name"]) == i]  # not a copy left by a broken move
+        models = [m for reply in replies for m in json.loads(reply.body)["models"]]
         return JSONResponse({"models": sorted(models, key=lambda m: m["name"])})
 
     @api.get("/metrics")
     async def metrics(request: Request) -> Response:
         """The shards' metrics, each sample with its ``shard`` label (Prometheus text)."""
-        replies = await asyncio.gather(*(forward(i, _copy(request, b"")) for i in range(n_shards)))
+        replies = await every("request", _copy(request, b""))
         for reply in replies:
             if reply.status != 200:
                 return _response(reply)
@@ -250,7 +206,7 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall) -> FastAPI:
 
     @api.websocket("/models/{name}/ws")
     async def model_stream(websocket: WebSocket, name: NamePath) -> None:
-        """A stream of steps for one model, each frame answered by the model's owner."""
+        """A stream of steps for one model, each frame answered by the model's shard."""
         if not token_ok(settings.token, given_token(websocket.headers, websocket.query_params)):
             await websocket.close(code=POLICY_VIOLATION, reason="missing or wrong bearer token")
             return
@@ -258,15 +214,13 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall) -> FastAPI:
 
         async def reply(text: str) -> str:
             try:
-                async with gates.use(name):
-                    answer: str = await on(placement.owner(name), "frame", name, text)
-                    return answer
+                answer: str = await routed([name], "frame", name, text)
+                return answer
             except ShieldError as error:
                 return json.dumps(error_body(error.code, error.message, error.field))
 
         try:
-            async with gates.use(name):
-                refusal = await on(placement.owner(name), "refusal", name)
+            refusal = await routed([name], "refusal", name)
         except ShieldError as error:
             refusal = error_body(error.code, error.message, error.field)
         if refusal is not None:
@@ -283,44 +237,14 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall) -> FastAPI:
     async def anything(path: str, request: Request) -> Response:
         """Every other route of the plain contract, answered by the shard of its model."""
         body = await _read(request, limit)
-        names = _named(request.method, request.url.path, body)
-        if request.url.path.endswith("/events") and names:
+        names = named(request.method, request.url.path, body)
+        if names and request.url.path.endswith("/events"):
             return JSONResponse(error_body(
                 "not_found", "a sharded service has no live event feed: watch a model on "
                 "python -m app serve"), status_code=404)
-        async with AsyncExitStack() as held:
-            for name in sorted(set(names)):
-                await held.enter_async_context(gates.use(name))
-            owners = {placement.owner(name) for name in names}
-            if len(owners) > 1:
-                raise SeveralShards(
-                    "a batch across models must name models of one shard (see GET /shards; "
-                    "POST /shards/move puts models together)", field="steps")
-            reply = await forward(owners.pop() if owners else 0, _copy(request, body))
-        if request.method == "DELETE" and reply.status == 204 and len(names) == 1:
-            placement.forget(names[0])
-        return _response(reply)
+        return _response(await routed(names, "request", _copy(request, body)))
 
     return api
-
-
-def _named(method: str, path: str, body: bytes) -> list[str]:
-    """The models a request is about: its path's, or those its body names when it creates a
-    model or steps several (an unreadable body names none: shard 0 answers its error)."""
-    if path in ("/models", "/revise/batch") and method == "POST":
-        try:
-            document = json.loads(body)
-        except ValueError:
-            return []
-        if not isinstance(document, dict):
-            return []
-        if path == "/models":
-            return [document["name"]] if isinstance(document.get("name"), str) else []
-        steps = document.get("steps")
-        return [s["model"] for s in steps if isinstance(s, dict) and isinstance(
-            s.get("model"), str)] if isinstance(steps, list) else []
-    name = subject(path)
-    return [] if name is None else [name]
 
 
 async def _read(request: Request, limit: int) -> bytes:
@@ -337,10 +261,6 @@ async def _read(request: Request, limit: int) -> bytes:
 def _copy(request: Request, body: bytes) -> asgi.Request:
     return asgi.Request(request.method, request.url.path, request.scope["query_string"],
                         tuple(request.scope["headers"]), body)
-
-
-def _auth(request: Request) -> tuple[tuple[bytes, bytes], ...]:
-    return tuple((k, v) for k, v in request.scope["headers"] if k == b"authorization")
 
 
 def _response(reply: asgi.Reply) -> Response:

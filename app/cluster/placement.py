@@ -1,9 +1,11 @@
-"""Which shard owns a model: rendezvous hashing of its name, and a table of the models moved.
+"""Which shard owns a model: rendezvous hashing of its name, and the moves that override it.
 
-Rendezvous (highest random weight) hashing gives every name a fixed shard without a central
-table, and a name's owner never depends on which other models exist. A model moved to another
-shard (to rebalance a cluster) is recorded in the table, which is stored beside the shards'
-data, so that an ingress that restarts routes it where its files are.
+Every name has a home shard, the one of highest rendezvous weight: the same on every process
+and machine, with no table to share, and a new shard takes only the names it wins. A model
+moved away leaves a forwarding entry on the shard it left (:class:`Moves` with a file, one per
+shard), so a request that reaches that shard learns where the model went; an ingress keeps
+what it learned in memory (:class:`Moves` without a file). So any number of ingresses route
+alike without sharing anything but the shards.
 """
 
 from __future__ import annotations
@@ -13,66 +15,42 @@ import json
 import os
 from pathlib import Path
 
-from app.settings import Settings
-
 
 class PlacementError(ValueError):
-    """A placement file that does not fit the cluster it was read for."""
+    """A cluster's data directory that does not fit the cluster started on it."""
 
 
-class Placement:
-    """The owner shard of every model name among ``n_shards`` shards."""
+class Moves:
+    """Models that are not on their home shard: name -> the shard they went to."""
 
-    def __init__(self, n_shards: int, path: Path | None = None) -> None:
-        if n_shards < 1:
-            raise PlacementError("a cluster has at least one shard")
-        self.n_shards = n_shards
+    def __init__(self, path: Path | None = None) -> None:
         self.path = path
-        self.moved: dict[str, int] = {}
-        if path is not None:
-            if path.exists():
-                self._load(path)
-            else:
-                self._save()  # the shard count is recorded from the first start on
+        self.where: dict[str, int] = {}
+        if path is not None and path.exists():
+            try:
+                where = json.loads(path.read_text())
+            except ValueError as error:
+                raise PlacementError(f"{path} is unreadable: {error}") from error
+            if not isinstance(where, dict) or not all(
+                    isinstance(k, str) and isinstance(v, int) and v >= 0
+                    for k, v in where.items()):
+                raise PlacementError(f"{path} must map model names to shard indices")
+            self.where = where
 
-    def owner(self, name: str) -> int:
-        """The shard that owns ``name``: where it was moved, else its highest-weight shard."""
-        moved = self.moved.get(name)
-        return moved if moved is not None else hashed_owner(name, self.n_shards)
+    def get(self, name: str) -> int | None:
+        """Where ``name`` went, if it moved."""
+        return self.where.get(name)
 
-    def move(self, name: str, shard: int) -> None:
-        """Record that ``name`` now lives on ``shard`` (and store the table)."""
-        if not 0 <= shard < self.n_shards:
-            raise PlacementError(f"shard {shard} is not among the {self.n_shards} shards")
-        if shard == hashed_owner(name, self.n_shards):
-            self.moved.pop(name, None)
-        else:
-            self.moved[name] = shard
-        self._save()
-
-    def forget(self, name: str) -> None:
-        """A deleted model goes back to its hashed owner (for a model of that name later)."""
-        if self.moved.pop(name, None) is not None:
+    def set(self, name: str, shard: int) -> None:
+        """``name`` is on ``shard`` now (stored at once when there is a file)."""
+        if self.where.get(name) != shard:
+            self.where[name] = shard
             self._save()
 
-    def _load(self, path: Path) -> None:
-        try:
-            data = json.loads(path.read_text())
-        except ValueError as error:
-            raise PlacementError(f"{path} is unreadable: {error}") from error
-        if not isinstance(data, dict):
-            raise PlacementError(f"{path} does not hold a placement")
-        if data.get("shards") != self.n_shards:
-            raise PlacementError(
-                f"{path} was written for {data.get('shards')} shards, not {self.n_shards}: a "
-                "cluster's models stay on the shards that hold their files; start it with the "
-                "same number of shards")
-        moved = data.get("moved", {})
-        if not isinstance(moved, dict) or not all(
-                isinstance(k, str) and isinstance(v, int) and 0 <= v < self.n_shards
-                for k, v in moved.items()):
-            raise PlacementError(f"{path}: 'moved' must map names to shard indices")
-        self.moved = dict(moved)
+    def discard(self, name: str) -> None:
+        """``name`` is back (stored at once when there is a file)."""
+        if self.where.pop(name, None) is not None:
+            self._save()
 
     def _save(self) -> None:
         if self.path is None:
@@ -80,20 +58,36 @@ class Placement:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         temporary = self.path.with_suffix(".tmp")
         with open(temporary, "w") as file:
-            json.dump({"shards": self.n_shards, "moved": self.moved}, file, sort_keys=True)
+            json.dump(self.where, file, sort_keys=True)
             file.flush()
             os.fsync(file.fileno())
         os.replace(temporary, self.path)
 
 
-def placement_path(settings: Settings) -> Path | None:
-    """Where a cluster with these settings keeps its placement (None: in memory only)."""
-    return None if settings.data_dir is None else settings.data_dir / "placement.json"
-
-
 def hashed_owner(name: str, n_shards: int) -> int:
-    """The shard of highest weight ``blake2b(shard, name)`` for ``name``: stable across
-    processes and machines, and adding a shard moves only the names it wins."""
+    """The home shard of ``name``: the highest weight ``blake2b(shard, name)``."""
     def weight(shard: int) -> bytes:
         return hashlib.blake2b(f"{shard}\0{name}".encode(), digest_size=8).digest()
     return max(range(n_shards), key=weight)
+
+
+def check_shards(data_dir: Path | None, n_shards: int) -> None:
+    """Refuse a data directory written by a cluster of another size (its models' home shards
+    would change); record the size on the first start."""
+    if n_shards < 1:
+        raise PlacementError("a cluster has at least one shard")
+    if data_dir is None:
+        return
+    path = data_dir / "cluster.json"
+    if path.exists():
+        try:
+            written = json.loads(path.read_text()).get("shards")
+        except (ValueError, AttributeError) as error:
+            raise PlacementError(f"{path} is unreadable: {error}") from error
+        if written != n_shards:
+            raise PlacementError(
+                f"{data_dir} holds a cluster of {written} shards, not {n_shards}: its models "
+                "stay on the shards that hold their files; start it with the same number")
+        return
+    data_dir.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"shards": n_shards}))

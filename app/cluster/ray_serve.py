@@ -18,7 +18,7 @@ from ray import serve
 from ray.serve.handle import DeploymentHandle
 
 from app.cluster.ingress import ingress_app
-from app.cluster.placement import Placement, placement_path
+from app.cluster.placement import check_shards
 from app.cluster.shard import ShardServer
 from app.core import compiled
 from app.settings import ClusterSettings, Settings
@@ -33,14 +33,21 @@ class Shard(ShardServer):
 
     def __init__(self, settings: Settings, index: int) -> None:
         compiled.warm()  # load the compiled core now, not at the first step
-        super().__init__(settings, index)
+        self._peers: dict[int, DeploymentHandle[Any]] = {}
+        super().__init__(settings, index, self._peer)
+
+    async def _peer(self, shard: int, method: str, *args: Any) -> Any:
+        if shard not in self._peers:
+            self._peers[shard] = serve.get_deployment_handle(f"shard-{shard}", APP_NAME)
+        return await getattr(self._peers[shard], method).remote(*args)
 
     def __del__(self) -> None:
         self.close()
 
 
 class Ingress:
-    """The HTTP and WebSocket contract of the service, over the shards' handles."""
+    """The HTTP and WebSocket contract of the service, over the shards' handles; it holds
+    nothing others must share, so Serve may run several."""
 
     def __init__(self, settings: Settings, *shards: DeploymentHandle[Any]) -> None:
         self._shards = shards
@@ -59,17 +66,19 @@ INGRESS = serve.deployment(ray_actor_options={"num_cpus": 0},
                            max_ongoing_requests=CONCURRENCY)(serve.ingress()(Ingress))
 
 
-def application(settings: Settings, n_shards: int) -> Any:
-    """The Serve application: the ingress bound to ``n_shards`` shards."""
-    shards = [SHARD.options(name=f"shard-{i}").bind(settings, i) for i in range(n_shards)]
-    return INGRESS.bind(settings, *shards)
+def application(settings: ClusterSettings) -> Any:
+    """The Serve application: ``settings.ingresses`` ingresses over ``settings.shards``
+    shards."""
+    shards = [SHARD.options(name=f"shard-{i}").bind(settings, i)
+              for i in range(settings.shards)]
+    return INGRESS.options(num_replicas=settings.ingresses).bind(settings, *shards)
 
 
 def run(settings: ClusterSettings) -> None:
     """Start (or join) Ray, deploy the service, and serve until SIGINT or SIGTERM; a data
     directory written for another number of shards is refused first
     (:class:`~app.cluster.placement.PlacementError`)."""
-    Placement(settings.shards, placement_path(settings))  # a wrong shard count fails here
+    check_shards(settings.data_dir, settings.shards)  # a wrong shard count fails here
     if settings.ray_address is None:
         ray.init(include_dashboard=False, num_cpus=settings.ray_cpus,
                  object_store_memory=settings.ray_object_store_mb * 2**20)
@@ -80,9 +89,9 @@ def run(settings: ClusterSettings) -> None:
         signal.signal(signum, lambda *_: stop.set())
     try:
         serve.start(http_options={"host": settings.host, "port": settings.port})
-        serve.run(application(settings, settings.shards), name=APP_NAME, route_prefix="/")
-        log.info("serving on http://%s:%d with %d shards", settings.host, settings.port,
-                 settings.shards)
+        serve.run(application(settings), name=APP_NAME, route_prefix="/")
+        log.info("serving on http://%s:%d: %d shards, %d ingresses", settings.host,
+                 settings.port, settings.shards, settings.ingresses)
         stop.wait()
     finally:
         log.info("stopping: the shards snapshot their models")

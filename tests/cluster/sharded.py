@@ -1,10 +1,10 @@
-"""The sharded service in one process: the ingress over :class:`ShardServer` objects, called
+"""The sharded service in one process: ingresses over :class:`ShardServer` objects, called
 directly where Ray Serve would call them through its handles."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from typing import Any
 
 from fastapi.testclient import TestClient
@@ -15,17 +15,27 @@ from app.settings import Settings
 
 
 @contextmanager
-def sharded_client(settings: Settings, n_shards: int = 2) -> Iterator[TestClient]:
-    """A client of the ingress over ``n_shards`` in-process shards (lifespan included)."""
-    servers = [ShardServer(settings, i) for i in range(n_shards)]
+def sharded_clients(settings: Settings, n_shards: int = 2, n_ingresses: int = 1
+                    ) -> Iterator[tuple[list[TestClient], list[ShardServer]]]:
+    """Clients of ``n_ingresses`` ingresses over the same ``n_shards`` in-process shards."""
+    servers: list[ShardServer] = []
 
     async def call(shard: int, method: str, *args: Any) -> Any:
         return await getattr(servers[shard], method)(*args)
 
+    servers.extend(ShardServer(settings, i, call) for i in range(n_shards))
     try:
-        with TestClient(ingress_app(settings, n_shards, call)) as client:
-            client.app.state.shards = servers  # type: ignore[attr-defined]
-            yield client
+        with ExitStack() as stack:
+            clients = [stack.enter_context(TestClient(ingress_app(settings, n_shards, call)))
+                       for _ in range(n_ingresses)]
+            yield clients, servers
     finally:
         for server in servers:
             server.close()
+
+
+@contextmanager
+def sharded_client(settings: Settings, n_shards: int = 2) -> Iterator[TestClient]:
+    """A client of one ingress over ``n_shards`` in-process shards (lifespan included)."""
+    with sharded_clients(settings, n_shards) as (clients, _):
+        yield clients[0]

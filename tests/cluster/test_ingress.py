@@ -1,22 +1,23 @@
-"""What a sharded service adds to the contract, in process: each model on its owner shard,
-batches within a shard, moves that lose no step, merged metrics, a shard that does not
-answer."""
+"""What a sharded service adds to the contract, in process: each model on its home shard,
+batches within a shard, moves that lose no step and that every ingress follows, merged
+metrics, a shard that does not answer."""
 
 from __future__ import annotations
 
 import asyncio
 import json
+import shutil
 from pathlib import Path
 from typing import Any
 
 from fastapi.testclient import TestClient
 
-from app.cluster.ingress import Gates, ingress_app, merge_metrics
+from app.cluster.ingress import ingress_app, merge_metrics
 from app.cluster.placement import hashed_owner
-from app.cluster.shard import ShardServer
+from app.cluster.shard import Gates, ShardServer
 from app.main import create_app
 from app.settings import Settings
-from tests.cluster.sharded import sharded_client
+from tests.cluster.sharded import sharded_client, sharded_clients
 
 NAMES = [f"car-{i}" for i in range(8)]
 
@@ -26,16 +27,11 @@ def step(t: int, done: bool = False) -> dict[str, Any]:
             "done": done, "event": "collision" if done else None}
 
 
-def servers(client: TestClient) -> list[ShardServer]:
-    shards: list[ShardServer] = client.app.state.shards  # type: ignore[attr-defined]
-    return shards
-
-
-def test_each_model_lives_on_its_owner_shard_and_is_listed_once() -> None:
-    with sharded_client(Settings(), n_shards=3) as c:
+def test_each_model_lives_on_its_home_shard_and_is_listed_once() -> None:
+    with sharded_clients(Settings(), n_shards=3) as ([c], servers):
         for name in NAMES:
             assert c.post("/models", json={"name": name}).status_code == 201
-        for index, server in enumerate(servers(c)):
+        for index, server in enumerate(servers):
             expected = {n for n in [*NAMES, "default"] if hashed_owner(n, 3) == index}
             assert set(server.registry.names()) == expected
         assert [m["name"] for m in c.get("/models").json()["models"]] == sorted(
@@ -58,35 +54,75 @@ def test_a_batch_across_models_of_several_shards_is_refused_and_changes_nothing(
         r = c.post("/revise/batch", json={"steps": [{**step(0), "model": a},
                                                     {**step(1), "model": together}]})
         assert r.status_code == 200 and len(r.json()["decisions"]) == 2
+        c.post("/shards/move", json={"model": b, "to": 0})  # together now
+        r = c.post("/revise/batch", json={"steps": [{**step(2), "model": a},
+                                                    {**step(3), "model": b}]})
+        assert r.status_code == 200 and len(r.json()["decisions"]) == 2
 
 
 def test_a_moved_model_goes_on_deciding_as_if_it_had_never_moved(tmp_path: Path) -> None:
     plain = TestClient(create_app(Settings()))
-    with plain, sharded_client(Settings(data_dir=tmp_path), n_shards=2) as c:
-        name = NAMES[0]
+    name = NAMES[0]
+    home = hashed_owner(name, 2)
+    with plain, sharded_clients(Settings(data_dir=tmp_path), n_shards=2) as ([c], servers):
         plain.post("/models", json={"name": name})
         c.post("/models", json={"name": name})
-        home = hashed_owner(name, 2)
         decisions, expected = [], []
         for t in range(60):
             if t in (20, 40):  # there and back again
                 to = 1 - home if t == 20 else home
                 r = c.post("/shards/move", json={"model": name, "to": to})
-                assert r.status_code == 200 and r.json()["to"] == to
-                assert name in servers(c)[to].registry.names()
-                assert name not in servers(c)[1 - to].registry.names()
+                assert r.status_code == 200 and r.json() == {"model": name, "from": 1 - to,
+                                                             "to": to}
+                assert name in servers[to].registry.names()
+                assert name not in servers[1 - to].registry.names()
             body = step(t, done=t % 15 == 14)
             decisions.append(c.post(f"/models/{name}/revise", json=body).json())
             expected.append(plain.post(f"/models/{name}/revise", json=body).json())
         assert decisions == expected
-        assert c.get("/shards").json()["moved"] == {}
-        c.post("/shards/move", json={"model": name, "to": 1 - home})
-        assert c.get("/shards").json()["moved"] == {name: 1 - home}
+        moved_away = [s["moved_away"] for s in c.get("/shards").json()["shards"]]
+        assert moved_away[home] == {} and moved_away[1 - home] == {name: home}  # for ingresses
+        c.post("/shards/move", json={"model": name, "to": 1 - home})  # that saw it there
+        assert c.get("/shards").json()["shards"][home]["moved_away"] == {name: 1 - home}
     with sharded_client(Settings(data_dir=tmp_path), n_shards=2) as c:  # the cluster restarts
-        r = c.post(f"/models/{name}/revise", json=step(60))
+        r = c.post(f"/models/{name}/revise", json=step(60))  # a new ingress: sent home first
         assert r.json() == plain.post(f"/models/{name}/revise", json=step(60)).json()
         assert c.delete(f"/models/{name}").status_code == 204
-        assert c.get("/shards").json()["moved"] == {}  # a new model of that name goes home
+        assert c.post("/models", json={"name": name}).status_code == 201  # where it went
+
+
+def test_every_ingress_follows_a_move_made_through_another() -> None:
+    with sharded_clients(Settings(), n_shards=3, n_ingresses=2) as ([first, second], _):
+        name = NAMES[1]
+        home = hashed_owner(name, 3)
+        first.post("/models", json={"name": name})
+        versions = []
+        for t, to in enumerate([(home + 1) % 3, (home + 2) % 3, home, (home + 1) % 3]):
+            assert first.post("/shards/move", json={"model": name, "to": to}).status_code == 200
+            versions.append(second.post(f"/models/{name}/revise", json=step(t)).json()
+                            ["model_version"])
+            with second.websocket_connect(f"/models/{name}/ws") as ws:
+                ws.send_text(json.dumps(step(t)))
+                versions.append(json.loads(ws.receive_text())["model_version"])
+        assert versions == list(range(1, 9))
+
+
+def test_a_move_cut_short_before_its_last_step_leaves_no_second_copy(tmp_path: Path) -> None:
+    name = NAMES[2]
+    home = hashed_owner(name, 2)
+    with sharded_client(Settings(data_dir=tmp_path), n_shards=2) as c:
+        c.post("/models", json={"name": name})
+        for t in range(10):
+            c.post(f"/models/{name}/revise", json=step(t))
+        copy = tmp_path / "left-behind"
+        shutil.copytree(tmp_path / "shards" / str(home) / "models" / name, copy)
+        c.post("/shards/move", json={"model": name, "to": 1 - home})
+        c.post(f"/models/{name}/revise", json=step(10))
+    shutil.copytree(copy, tmp_path / "shards" / str(home) / "models" / name)  # not deleted
+    with sharded_clients(Settings(data_dir=tmp_path), n_shards=2) as ([c], servers):
+        assert name not in servers[home].registry.names()
+        assert [m["name"] for m in c.get("/models").json()["models"]] == [name, "default"]
+        assert c.post(f"/models/{name}/revise", json=step(11)).json()["model_version"] == 12
 
 
 def test_bad_moves_are_refused_and_change_nothing() -> None:
@@ -99,15 +135,16 @@ def test_bad_moves_are_refused_and_change_nothing() -> None:
         assert (r.status_code, r.json()["error"]["code"]) == (422, "invalid_name")
         r = c.post("/shards/move", json={"model": "ghost", "to": 0}, headers=auth)
         assert (r.status_code, r.json()["error"]["code"]) == (404, "unknown_model")
-        assert c.get("/shards", headers=auth).json()["moved"] == {}
+        shards = c.get("/shards", headers=auth).json()["shards"]
+        assert [s["moved_away"] for s in shards] == [{}, {}]
 
 
 def test_a_move_waits_for_the_steps_in_flight_and_holds_the_next() -> None:
     async def scenario() -> list[str]:
         gates, order = Gates(), []
 
-        async def request(label: str, delay: float) -> None:
-            async with gates.use("m"):
+        async def request(name: str, label: str, delay: float) -> None:
+            async with gates.use([name]):
                 await asyncio.sleep(delay)
                 order.append(label)
 
@@ -115,18 +152,14 @@ def test_a_move_waits_for_the_steps_in_flight_and_holds_the_next() -> None:
             async with gates.exclusive("m"):
                 order.append("moved")
 
-        first = asyncio.create_task(request("in flight", 0.05))
+        first = asyncio.create_task(request("m", "in flight", 0.05))
         await asyncio.sleep(0.01)
         moving = asyncio.create_task(move())
         await asyncio.sleep(0.01)
-        after = asyncio.create_task(request("after", 0.0))
-        other = asyncio.create_task(request_other(gates, order))
+        after = asyncio.create_task(request("m", "after", 0.0))
+        other = asyncio.create_task(request("n", "other model", 0.0))
         await asyncio.gather(first, moving, after, other)
         return order
-
-    async def request_other(gates: Gates, order: list[str]) -> None:
-        async with gates.use("n"):
-            order.append("other model")
 
     assert asyncio.run(scenario()) == ["other model", "in flight", "moved", "after"]
 
@@ -145,7 +178,6 @@ def test_metrics_are_merged_with_a_shard_label() -> None:
 
 def test_a_shard_that_does_not_answer_is_a_clear_503_and_others_serve() -> None:
     settings = Settings()
-    live = [ShardServer(settings, i) for i in range(2)]
     down = 1 - hashed_owner("default", 2)
 
     async def call(shard: int, method: str, *args: Any) -> Any:
@@ -153,6 +185,7 @@ def test_a_shard_that_does_not_answer_is_a_clear_503_and_others_serve() -> None:
             raise ConnectionError("the replica died")
         return await getattr(live[shard], method)(*args)
 
+    live = [ShardServer(settings, i, call) for i in range(2)]
     with TestClient(ingress_app(settings, 2, call)) as c:
         name = next(n for n in NAMES if hashed_owner(n, 2) == down)
         r = c.post(f"/models/{name}/revise", json=step(0))

@@ -1,4 +1,5 @@
-"""Which shard owns a model: rendezvous hashing, the table of moved models, its file."""
+"""Which shard owns a model: rendezvous hashing, the moves that override it, and the size of
+the cluster a data directory belongs to."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from app.cluster.placement import Placement, PlacementError, hashed_owner
+from app.cluster.placement import Moves, PlacementError, check_shards, hashed_owner
 
 NAMES = [f"car-{i}" for i in range(2000)]
 
@@ -30,32 +31,33 @@ def test_adding_a_shard_moves_only_the_names_it_wins() -> None:
 
 
 def test_moves_are_stored_and_read_back(tmp_path: Path) -> None:
-    path = tmp_path / "placement.json"
-    placement = Placement(3, path)
-    assert json.loads(path.read_text()) == {"moved": {}, "shards": 3}  # the count, from the start
-    name = NAMES[0]
-    target = (hashed_owner(name, 3) + 1) % 3
-    placement.move(name, target)
-    assert Placement(3, path).owner(name) == target
-    placement.move(name, hashed_owner(name, 3))  # back home: no entry left
-    assert Placement(3, path).moved == {}
-    placement.move(name, target)
-    placement.forget(name)
-    assert Placement(3, path).owner(name) == hashed_owner(name, 3)
+    path = tmp_path / "moved.json"
+    moves = Moves(path)
+    moves.set("a", 2)
+    moves.set("b", 0)
+    assert Moves(path).where == {"a": 2, "b": 0}
+    moves.discard("a")
+    assert Moves(path).get("a") is None and Moves(path).get("b") == 0
+    assert Moves().get("b") is None  # in memory only: nothing read
 
 
-def test_a_placement_file_of_another_cluster_or_damaged_is_refused(tmp_path: Path) -> None:
-    path = tmp_path / "placement.json"
-    Placement(2, path)
-    with pytest.raises(PlacementError, match="written for 2 shards, not 3"):
-        Placement(3, path)
-    path.write_text(json.dumps({"shards": 2, "moved": {"a": 7}}))
-    with pytest.raises(PlacementError, match="'moved' must map names to shard indices"):
-        Placement(2, path)
+def test_damaged_move_files_are_refused(tmp_path: Path) -> None:
+    path = tmp_path / "moved.json"
     path.write_text("{not json")
     with pytest.raises(PlacementError, match="unreadable"):
-        Placement(2, path)
-    with pytest.raises(PlacementError, match="not among"):
-        Placement(2).move("a", 2)
+        Moves(path)
+    path.write_text(json.dumps({"a": -1}))
+    with pytest.raises(PlacementError, match="must map model names to shard indices"):
+        Moves(path)
+
+
+def test_a_data_directory_of_another_cluster_size_is_refused(tmp_path: Path) -> None:
+    check_shards(tmp_path, 2)
+    check_shards(tmp_path, 2)  # the same size again: fine
+    with pytest.raises(PlacementError, match="holds a cluster of 2 shards, not 3"):
+        check_shards(tmp_path, 3)
+    (tmp_path / "cluster.json").write_text("[]")
+    with pytest.raises(PlacementError, match="unreadable"):
+        check_shards(tmp_path, 2)
     with pytest.raises(PlacementError, match="at least one shard"):
-        Placement(0)
+        check_shards(None, 0)

@@ -1,6 +1,7 @@
 """The sharded service on Ray Serve, as a user starts it (``python -m app serve-ray``, a local
-Ray instance on 127.0.0.1, two shards, ``fsync always``): the contract through it, a shard
-killed mid-stream, a model moved between shards while it is written."""
+Ray instance, served on 127.0.0.1, two shards and two ingresses, ``fsync always``): the
+contract through it, a shard killed mid-stream, a model moved between shards while it is
+written."""
 
 from __future__ import annotations
 
@@ -43,9 +44,9 @@ class Cluster:
         self.log = data_dir.parent / "serve-ray.log"
         self.process = subprocess.Popen(
             [sys.executable, "-m", "app", "serve-ray", "--host", "127.0.0.1", "--port",
-             str(self.port), "--data-dir", str(data_dir), "--shards", "2", "--fsync", "always",
-             "--ray-cpus", "2"], stdout=open(self.log, "wb"), stderr=subprocess.STDOUT,
-            start_new_session=True)
+             str(self.port), "--data-dir", str(data_dir), "--shards", "2", "--ingresses", "2",
+             "--fsync", "always", "--ray-cpus", "2"],
+            stdout=open(self.log, "wb"), stderr=subprocess.STDOUT, start_new_session=True)
         deadline = time.monotonic() + 180
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
