@@ -13,6 +13,7 @@ import sys
 
 import uvicorn
 
+from app.cluster.placement import PlacementError
 from app.core import compiled
 from app.main import create_app
 from app.settings import ClusterSettings, Settings
@@ -49,8 +50,6 @@ def serve_ray(argv: list[str]) -> None:
     settings = ClusterSettings(_cli_parse_args=argv)
     logging.basicConfig(level=settings.log_level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    from app.cluster.placement import PlacementError
-
     try:
         from app.cluster import ray_serve
     except ImportError as error:

@@ -9,8 +9,8 @@ Serve can run as many as the traffic needs. ``GET /models``, ``/readyz`` and ``/
 every shard. Two routes are the cluster's own: ``GET /shards`` (where each shard runs, what it
 holds and gave away) and ``POST /shards/move`` (a model to another shard, handed over by its
 shard without losing a step). Shards are reached through ``call(shard, method, *args)``, a
-coroutine: Ray Serve's handles in :mod:`app.cluster.ray_serve`, the objects themselves in
-tests.
+coroutine, and ``stream(shard, method, *args)``, an async iterator (the live event feed):
+Ray Serve's handles in :mod:`app.cluster.ray_serve`, the objects themselves in tests.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI, Request, WebSocket
-from fastapi.responses import JSONResponse, Response
+from fastapi.responses import JSONResponse, Response, StreamingResponse
 from pydantic import BaseModel, Field
 
 import app
@@ -37,7 +37,7 @@ from app.api.schemas import ModelName
 from app.cluster import asgi
 from app.cluster.placement import Moves, hashed_owner
 from app.cluster.routing import named
-from app.cluster.shard import Moved, ShardCall
+from app.cluster.shard import Moved, ShardCall, ShardStream
 from app.core import ShieldError
 from app.service.registry import DEFAULT_MODEL
 from app.settings import Settings
@@ -100,8 +100,9 @@ def _labelled(sample: str, shard: int) -> str:
     return f'{name}{{shard="{shard}"{"" if rest.startswith("}") else ","}{rest}'
 
 
-def ingress_app(settings: Settings, n_shards: int, call: ShardCall) -> FastAPI:
-    """An ingress over ``n_shards`` shards reached through ``call``."""
+def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: ShardStream
+                ) -> FastAPI:
+    """An ingress over ``n_shards`` shards reached through ``call`` and ``stream``."""
     learned = Moves()  # where this ingress saw models go; the shards hold the truth
     limit = max(settings.max_body_bytes, settings.max_snapshot_bytes)
 
@@ -133,6 +134,24 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall) -> FastAPI:
             else:
                 learned.set(result.name, result.owner)
         raise ShardUnavailable(f"{names} kept moving while the request was sent: send again")
+
+    async def streamed(name: str, request: asgi.Request) -> Response:
+        """The streamed answer of the shard of ``name``, following the moves it reports."""
+        for _ in range(n_shards + 2):
+            parts = stream(owner(name), "stream", request)
+            try:
+                head = await anext(parts)
+            except Exception as error:  # a shard that died or cannot be reached
+                log.error("shard %d did not answer a stream: %r", owner(name), error)
+                raise ShardUnavailable(f"shard {owner(name)} did not answer "
+                                       f"({type(error).__name__}): send again") from error
+            if isinstance(head, Moved):
+                learned.set(head.name, head.owner)
+                continue
+            response = StreamingResponse(_bodies(parts), status_code=head.status)
+            response.raw_headers = list(head.headers)
+            return response
+        raise ShardUnavailable(f"{name!r} kept moving while the request was sent: send again")
 
     async def every(method: str, *args: Any) -> list[Any]:
         return list(await asyncio.gather(*(on(i, method, *args) for i in range(n_shards))))
@@ -238,13 +257,17 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall) -> FastAPI:
         """Every other route of the plain contract, answered by the shard of its model."""
         body = await _read(request, limit)
         names = named(request.method, request.url.path, body)
-        if names and request.url.path.endswith("/events"):
-            return JSONResponse(error_body(
-                "not_found", "a sharded service has no live event feed: watch a model on "
-                "python -m app serve"), status_code=404)
+        if len(names) == 1 and request.url.path.endswith("/events"):
+            return await streamed(names[0], _copy(request, body))
         return _response(await routed(names, "request", _copy(request, body)))
 
     return api
+
+
+async def _bodies(parts: AsyncIterator[Any]) -> AsyncIterator[bytes]:
+    """The pieces of a streamed body (after its head)."""
+    async for part in parts:
+        yield part
 
 
 async def _read(request: Request, limit: int) -> bytes:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import signal
 import threading
+from collections.abc import AsyncIterator
 from typing import Any
 
 import ray
@@ -51,10 +52,15 @@ class Ingress:
 
     def __init__(self, settings: Settings, *shards: DeploymentHandle[Any]) -> None:
         self._shards = shards
-        self._asgi = ingress_app(settings, len(shards), self._call)
+        self._asgi = ingress_app(settings, len(shards), self._call, self._stream)
 
     async def _call(self, shard: int, method: str, *args: Any) -> Any:
         return await getattr(self._shards[shard], method).remote(*args)
+
+    def _stream(self, shard: int, method: str, *args: Any) -> AsyncIterator[Any]:
+        parts: AsyncIterator[Any] = getattr(self._shards[shard].options(stream=True),
+                                            method).remote(*args)
+        return parts
 
     def __serve_build_asgi_app__(self) -> Any:
         return self._asgi

@@ -21,7 +21,7 @@ from typing import Any
 
 from app.api.errors import error_body, status_of
 from app.api.routes.stream import answer
-from app.cluster.asgi import Reply, Request, call
+from app.cluster.asgi import Reply, Request, call, stream
 from app.cluster.placement import Moves
 from app.cluster.routing import named
 from app.core import ShieldError
@@ -34,6 +34,8 @@ log = logging.getLogger("app.cluster")
 
 ShardCall = Callable[..., Awaitable[Any]]
 """``call(shard, method, *args)``: run a :class:`ShardServer` method on shard ``shard``."""
+ShardStream = Callable[..., AsyncIterator[Any]]
+"""``stream(shard, method, *args)``: the parts of a :class:`ShardServer` method that streams."""
 
 
 @dataclass(frozen=True)
@@ -120,6 +122,19 @@ class ShardServer:
         names = named(request.method, request.path, request.body)
         async with self.gates.use(names):
             return self._away(names) or await call(self.app, request)
+
+    async def stream(self, request: Request) -> AsyncIterator[Reply | bytes | Moved]:
+        """A streamed answer (the live event feed of a model): its head, then its pieces. A
+        stream does not hold its model here; once the model moved away it ends (within the
+        feed's 10 s ping), and a reconnecting reader is sent where the model went."""
+        names = named(request.method, request.path, request.body)
+        if (away := self._away(names)) is not None:
+            yield away
+            return
+        async for part in stream(self.app, request):
+            yield part
+            if self._away(names) is not None:
+                return
 
     async def frame(self, name: str, text: str) -> str | Moved:
         """One WebSocket frame (a step of model ``name``): the decision record or an error."""

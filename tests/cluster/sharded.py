@@ -3,7 +3,7 @@ directly where Ray Serve would call them through its handles."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
 from contextlib import ExitStack, contextmanager
 from typing import Any
 
@@ -23,11 +23,15 @@ def sharded_clients(settings: Settings, n_shards: int = 2, n_ingresses: int = 1
     async def call(shard: int, method: str, *args: Any) -> Any:
         return await getattr(servers[shard], method)(*args)
 
+    def stream(shard: int, method: str, *args: Any) -> AsyncIterator[Any]:
+        parts: AsyncIterator[Any] = getattr(servers[shard], method)(*args)
+        return parts
+
     servers.extend(ShardServer(settings, i, call) for i in range(n_shards))
     try:
         with ExitStack() as stack:
-            clients = [stack.enter_context(TestClient(ingress_app(settings, n_shards, call)))
-                       for _ in range(n_ingresses)]
+            apps = [ingress_app(settings, n_shards, call, stream) for _ in range(n_ingresses)]
+            clients = [stack.enter_context(TestClient(app)) for app in apps]
             yield clients, servers
     finally:
         for server in servers:

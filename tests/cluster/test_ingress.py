@@ -12,9 +12,10 @@ from typing import Any
 
 from fastapi.testclient import TestClient
 
+from app.cluster import asgi
 from app.cluster.ingress import ingress_app, merge_metrics
 from app.cluster.placement import hashed_owner
-from app.cluster.shard import Gates, ShardServer
+from app.cluster.shard import Gates, Moved, ShardServer
 from app.main import create_app
 from app.settings import Settings
 from tests.cluster.sharded import sharded_client, sharded_clients
@@ -186,7 +187,7 @@ def test_a_shard_that_does_not_answer_is_a_clear_503_and_others_serve() -> None:
         return await getattr(live[shard], method)(*args)
 
     live = [ShardServer(settings, i, call) for i in range(2)]
-    with TestClient(ingress_app(settings, 2, call)) as c:
+    with TestClient(ingress_app(settings, 2, call, None)) as c:  # type: ignore[arg-type]
         name = next(n for n in NAMES if hashed_owner(n, 2) == down)
         r = c.post(f"/models/{name}/revise", json=step(0))
         assert r.status_code == 503 and r.json()["error"]["code"] == "shard_unavailable"
@@ -196,7 +197,56 @@ def test_a_shard_that_does_not_answer_is_a_clear_503_and_others_serve() -> None:
             assert json.loads(ws.receive_text())["error"]["code"] == "shard_unavailable"
 
 
-def test_the_live_event_feed_is_refused_with_a_reason() -> None:
-    with sharded_client(Settings()) as c:
-        r = c.get("/models/default/events")
-        assert r.status_code == 404 and "live event feed" in r.json()["error"]["message"]
+def test_a_streamed_answer_passes_on_as_it_comes_and_stops_when_the_reader_leaves() -> None:
+    finished = []
+
+    async def app(scope: Any, receive: Any, send: Any) -> None:
+        await send({"type": "http.response.start", "status": 200, "headers": []})
+        try:
+            for piece in range(1000):
+                await send({"type": "http.response.body", "body": b"%d;" % piece,
+                            "more_body": True})
+                await asyncio.sleep(0)
+        finally:
+            finished.append(True)
+
+    async def read() -> list[Any]:
+        parts: list[Any] = []
+        async for part in asgi.stream(app, asgi.Request("GET", "/")):
+            parts.append(part)
+            if len(parts) == 4:
+                break
+        await asyncio.sleep(0.01)
+        return parts
+
+    parts = asyncio.run(read())
+    assert parts[0] == asgi.Reply(200, (), b"") and parts[1:] == [b"0;", b"1;", b"2;"]
+    assert finished == [True]  # the app was stopped, not left running
+
+
+def test_a_shard_streams_the_live_feed_and_ends_it_once_the_model_moved() -> None:
+    with sharded_clients(Settings(), n_shards=2) as ([c], servers):
+        home = hashed_owner("default", 2)
+
+        async def watch() -> list[Any]:
+            parts, seen = [], servers[home].stream(asgi.Request("GET", "/models/default/events"))
+            async for part in seen:
+                parts.append(part)
+                if len(parts) == 2:  # the head and the hello: step, then move
+                    await servers[home].request(asgi.Request(
+                        "POST", "/revise", b"", ((b"content-type", b"application/json"),),
+                        json.dumps(step(0)).encode()))
+                if len(parts) == 3:
+                    assert (await servers[home].move("default", 1 - home)).status == 200
+            return parts
+
+        parts = asyncio.run(asyncio.wait_for(watch(), 30))
+        assert parts[0].status == 200
+        assert json.loads(parts[1].decode().split("data: ")[1])["type"] == "hello"
+        assert json.loads(parts[2].decode().split("data: ")[1])["type"] == "step"
+        assert len(parts) == 3  # ended after the move
+
+        async def reconnect() -> Any:
+            return await anext(servers[home].stream(asgi.Request("GET", "/models/default/events")))
+
+        assert asyncio.run(reconnect()) == Moved("default", 1 - home)

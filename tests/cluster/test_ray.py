@@ -187,3 +187,29 @@ def test_a_model_moves_between_shards_under_load_without_losing_a_step(
     shards = httpx.get(u + "/shards").json()
     assert moved in shards["shards"][1 - home]["models"]
     assert moved not in shards["shards"][home]["models"]
+
+
+def test_the_live_feed_through_ray_ends_at_a_move_and_resumes_where_the_model_went(
+        cluster: Cluster) -> None:
+    u, name = cluster.url, "watched"
+    assert httpx.post(u + "/models", json={"name": name}).status_code == 201
+
+    def events(lines: Iterator[str]) -> Iterator[dict[str, Any]]:
+        for line in lines:
+            if line.startswith("data: "):
+                yield json.loads(line[6:])
+
+    with httpx.stream("GET", f"{u}/models/{name}/events", timeout=60) as response:
+        feed = events(response.iter_lines())
+        assert next(feed)["type"] == "hello"
+        httpx.post(f"{u}/models/{name}/revise", json=step(0))
+        assert next(feed)["decision"]["model_version"] == 1
+        home = hashed_owner(name, 2)
+        assert httpx.post(u + "/shards/move", json={"model": name, "to": 1 - home}).status_code \
+            == 200
+        began = time.monotonic()
+        assert [e["type"] for e in feed] == ["ping"]  # then the stream ends
+        assert time.monotonic() - began < 15
+    with httpx.stream("GET", f"{u}/models/{name}/events", timeout=60) as response:
+        hello = next(events(response.iter_lines()))
+        assert hello["type"] == "hello" and hello["model_version"] == 1
