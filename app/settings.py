@@ -64,12 +64,7 @@ class Settings(BaseSettings):
 class ClusterSettings(Settings):
     """``python -m app serve-ray``: the service sharded on Ray Serve (:mod:`app.cluster`)."""
 
-    model_config = SettingsConfigDict(
-        env_prefix="EFSM_",
-        cli_kebab_case=True,
-        cli_prog_name="python -m app serve-ray",
-        cli_implicit_flags=True,
-    )
+    model_config = SettingsConfigDict(cli_prog_name="python -m app serve-ray")  # merged
 
     shards: int = Field(2, ge=1, le=1024, description="Shards; each owns the models whose "
                         "names it wins, and keeps its files under <data-dir>/shards/<i>.")

@@ -156,6 +156,11 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
     async def every(method: str, *args: Any) -> list[Any]:
         return list(await asyncio.gather(*(on(i, method, *args) for i in range(n_shards))))
 
+    async def everywhere(request: Request) -> tuple[list[asgi.Reply], asgi.Reply | None]:
+        """A request without a body answered by every shard, and the first refusal."""
+        replies: list[asgi.Reply] = await every("request", _copy(request, b""))
+        return replies, next((r for r in replies if r.status != 200), None)
+
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
         await routed([DEFAULT_MODEL], "ensure_default")
@@ -206,20 +211,18 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
     @api.get("/models")
     async def list_models(request: Request) -> Response:
         """Every model of every shard, by name."""
-        replies = await every("request", _copy(request, b""))
-        for reply in replies:
-            if reply.status != 200:
-                return _response(reply)
+        replies, refused = await everywhere(request)
+        if refused is not None:
+            return _response(refused)
         models = [m for reply in replies for m in json.loads(reply.body)["models"]]
         return JSONResponse({"models": sorted(models, key=lambda m: m["name"])})
 
     @api.get("/metrics")
     async def metrics(request: Request) -> Response:
         """The shards' metrics, each sample with its ``shard`` label (Prometheus text)."""
-        replies = await every("request", _copy(request, b""))
-        for reply in replies:
-            if reply.status != 200:
-                return _response(reply)
+        replies, refused = await everywhere(request)
+        if refused is not None:
+            return _response(refused)
         return Response(merge_metrics([r.body.decode() for r in replies]),
                         media_type="text/plain; version=0.0.4; charset=utf-8")
 
