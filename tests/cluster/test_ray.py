@@ -208,8 +208,8 @@ def test_the_live_feed_through_ray_ends_at_a_move_and_resumes_where_the_model_we
         assert httpx.post(u + "/shards/move", json={"model": name, "to": 1 - home}).status_code \
             == 200
         began = time.monotonic()
-        assert [e["type"] for e in feed] == ["ping"]  # then the stream ends
-        assert time.monotonic() - began < 15
+        after = {e["type"] for e in feed}  # until the stream ends, at the feed's next ping
+        assert after == {"ping"} and time.monotonic() - began < 30
     with httpx.stream("GET", f"{u}/models/{name}/events", timeout=60) as response:
         hello = next(events(response.iter_lines()))
         assert hello["type"] == "hello" and hello["model_version"] == 1
