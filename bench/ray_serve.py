@@ -11,7 +11,9 @@ decided on):
 * steps a second with the same clients sending batches of ``--batch`` steps;
 * the CPU time a step costs in each part of the server during those two (read from /proc:
   Serve's HTTP proxy, the ingress, the shards, the rest of Ray or the plain server), which
-  says what one core of each part carries, however many machines there are.
+  says what one core of each part carries, however many machines there are;
+* and, for scale, the ingress's own code alone: a batch request through its app in this
+  process, its shard answering at once.
 
 The clients run here (asyncio, one thread), the servers in other processes: on a 2-core
 machine they share the cores. Reported: medians over rounds.
@@ -127,6 +129,31 @@ async def throughput(url: str, names: list[str], seconds: float, batch: int
         return done, time.perf_counter() - began
 
 
+def ingress_alone(batch: int, count: int = 2000) -> float:
+    """Microseconds of a batch request through the ingress app, with no Ray and a shard
+    that answers at once: what the ingress's own code costs."""
+    from app.cluster import asgi
+    from app.cluster.ingress import ingress_app
+    from app.settings import Settings
+
+    body = json.dumps({"steps": [step(t) for t in range(batch)]}).encode()
+    reply = asgi.Reply(200, ((b"content-type", b"application/json"),), b"{}")
+
+    async def call(shard: int, method: str, *args: Any) -> Any:
+        return reply if method == "request" else None
+
+    async def requests() -> float:
+        app = ingress_app(Settings(), 2, call, None)  # type: ignore[arg-type]
+        request = asgi.Request("POST", "/models/bench-0/revise/batch", b"",
+                               ((b"content-type", b"application/json"),), body)
+        began = time.perf_counter()
+        for _ in range(count):
+            await asgi.call(app, request)
+        return (time.perf_counter() - began) / count * 1e6
+
+    return asyncio.run(requests())
+
+
 def measure(command: list[str], args: argparse.Namespace) -> dict[str, float]:
     process, url = start(command)
     try:
@@ -180,7 +207,10 @@ def main() -> None:
         for label, command in servers.items():
             results[label] = measure(command, args)
             print(label, {k: round(v, 2) for k, v in results[label].items()}, flush=True)
+    alone = statistics.median(ingress_alone(args.batch) for _ in range(args.rounds))
     plain = results["plain"]
+    print(f"\nthe ingress's own code, in process: {alone:.0f} us a batch request "
+          f"({alone / args.batch:.1f} us a step)")
     print(f"\n{os.cpu_count()} cores ({platform.processor() or platform.machine()}); "
           f"{args.clients} clients, batches of {args.batch}; medians of {args.rounds} rounds\n")
     print("| server | step latency (ms) | extra over plain (ms) | steps/s, one a request "
@@ -192,7 +222,8 @@ def main() -> None:
               f"| {r['steps_per_s']:.0f} | {r['batch_steps_per_s']:.0f} | {cpu} |")
     if args.out is not None:
         args.out.write_text(json.dumps({"args": vars(args) | {"out": str(args.out)},
-                                        "results": results}, indent=1))
+                                        "results": results, "ingress_alone_us": alone},
+                                       indent=1))
 
 
 if __name__ == "__main__":
