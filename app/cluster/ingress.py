@@ -110,6 +110,13 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
         moved = learned.get(name)
         return hashed_owner(name, n_shards) if moved is None else moved
 
+    def learn(moved: Moved) -> None:
+        """Remember where a model went (and forget it once it is back home)."""
+        if moved.owner == hashed_owner(moved.name, n_shards):
+            learned.discard(moved.name)
+        else:
+            learned.set(moved.name, moved.owner)
+
     async def on(shard: int, method: str, *args: Any) -> Any:
         try:
             return await call(shard, method, *args)
@@ -129,10 +136,7 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
             result = await on(owners.pop() if owners else 0, method, *args)
             if not isinstance(result, Moved):
                 return result
-            if result.owner == hashed_owner(result.name, n_shards):
-                learned.discard(result.name)
-            else:
-                learned.set(result.name, result.owner)
+            learn(result)
         raise ShardUnavailable(f"{names} kept moving while the request was sent: send again")
 
     async def streamed(name: str, request: asgi.Request) -> Response:
@@ -146,7 +150,7 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
                 raise ShardUnavailable(f"shard {owner(name)} did not answer "
                                        f"({type(error).__name__}): send again") from error
             if isinstance(head, Moved):
-                learned.set(head.name, head.owner)
+                learn(head)
                 continue
             response = StreamingResponse(_bodies(parts), status_code=head.status)
             response.raw_headers = list(head.headers)
@@ -205,7 +209,7 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
             raise UnknownShard(f"the cluster has shards 0 to {n_shards - 1}", field="to")
         reply: asgi.Reply = await routed([body.model], "move", body.model, body.to)
         if reply.status == 200:
-            learned.set(body.model, body.to)
+            learn(Moved(body.model, body.to))
         return _response(reply)
 
     @api.get("/models")
