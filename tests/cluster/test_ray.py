@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -26,6 +27,7 @@ from app.main import create_app
 from app.settings import Settings
 from tests.conftest import free_port
 
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.xdist_group("ray")  # one Ray instance at a time on a small machine
 
 
@@ -213,3 +215,30 @@ def test_the_live_feed_through_ray_ends_at_a_move_and_resumes_where_the_model_we
     with httpx.stream("GET", f"{u}/models/{name}/events", timeout=60) as response:
         hello = next(events(response.iter_lines()))
         assert hello["type"] == "hello" and hello["model_version"] == 1
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="needs Debian's chromium (.ci/run installs it)")
+def test_the_dashboard_follows_a_model_through_ray(cluster: Cluster) -> None:
+    playwright = pytest.importorskip("playwright.sync_api")
+    u, name = cluster.url, "dashboard"
+    assert httpx.post(u + "/models", json={"name": name}).status_code == 201
+    for t in range(80):
+        httpx.post(f"{u}/models/{name}/revise", json=step(t))
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+        page = browser.new_page()
+        errors: list[str] = []
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(f"{u}/dashboard")
+        page.select_option("#model", name)
+        page.wait_for_function(f"document.getElementById('status').textContent == 'live: {name}'",
+                               timeout=20000)
+        probe = httpx.post(f"{u}/models/{name}/revise", json={**step(80), "observation":
+                                                              [31.0, 400.0, 1.0]}).json()
+        assert probe["new_state"]  # far beyond the stream: a new state, which the page shows
+        page.wait_for_function(
+            f"document.getElementById('state-count').textContent == '{probe['n_states']}'",
+            timeout=10000)
+        browser.close()
+    assert errors == []
