@@ -28,7 +28,9 @@ from app.settings import Settings
 from tests.conftest import free_port
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = pytest.mark.xdist_group("ray")  # one Ray instance at a time on a small machine
+# one worker runs this group, one test after another: one Ray instance at a time, and never
+# beside a test that times the service (a Ray instance keeps a small machine's cores busy)
+pytestmark = pytest.mark.xdist_group("ray")
 
 
 def step(t: int) -> dict[str, Any]:

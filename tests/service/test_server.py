@@ -254,6 +254,7 @@ def test_the_container_command_runs_outside_docker(tmp_path: Path) -> None:
         process.wait(10)
 
 
+@pytest.mark.xdist_group("ray")  # timed: not beside a Ray instance (tests/cluster/test_ray.py)
 def test_a_long_batch_on_one_model_does_not_stall_another(live_server: Server) -> None:
     with ShieldClient(live_server.url) as admin:
         admin.create_model("busy")
