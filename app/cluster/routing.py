@@ -9,9 +9,9 @@ from app.service.registry import DEFAULT_MODEL
 
 
 def named(method: str, path: str, body: bytes) -> list[str]:
-    """The models a request is about: its path's (``/models/{name}/...``; ``/revise``,
-    ``/model`` and ``/ws`` mean 'default'), or those its body names when it creates a model or
-    steps several. None for the rest, and for a body that cannot be read (any shard answers
+    """The models an HTTP request is about: its path's (``/models/{name}/...``; ``/revise``
+    and ``/model`` mean 'default'), or those its body names when it creates a model or steps
+    several. None for the rest, and for a body that cannot be read (any shard answers
     its error)."""
     if method == "POST" and path in ("/models", "/revise/batch"):
         try:
@@ -30,6 +30,6 @@ def named(method: str, path: str, body: bytes) -> list[str]:
     parts = path.strip("/").split("/")
     if parts[0] == "models" and len(parts) >= 2 and parts[1]:
         return [parts[1]]
-    if path in ("/revise", "/model", "/ws"):
+    if path in ("/revise", "/model"):
         return [DEFAULT_MODEL]
     return []

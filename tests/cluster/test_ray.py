@@ -244,3 +244,14 @@ def test_the_dashboard_follows_a_model_through_ray(cluster: Cluster) -> None:
             timeout=10000)
         browser.close()
     assert errors == []
+
+
+def test_a_data_directory_of_another_cluster_size_is_refused_in_one_line(tmp_path: Path) -> None:
+    (tmp_path / "cluster.json").write_text('{"shards": 2}')
+    done = subprocess.run([sys.executable, "-m", "app", "serve-ray", "--shards", "3",
+                           "--data-dir", str(tmp_path)], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines()[-1] == (
+        f"{tmp_path} holds a cluster of 2 shards, not 3: its models stay on the shards that "
+        "hold their files; start it with the same number")
