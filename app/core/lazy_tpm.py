@@ -9,6 +9,12 @@ The first term is the padding, which depends only on when states appeared; the s
 was learned, ``S_a = sum_t phi tau_t gamma_t^T / D_a(t)``, sparse because beliefs are truncated
 to their top-k states. Rows are normalised on demand: ``P^a(i, .) = F^a(i, .) / F_o^a(i)``.
 
+The learned entries of every row of every action live in one pool: a row is a contiguous run
+``[start, start + cap)`` of which the first ``nnz`` slots are used, in the order learned. A
+row that fills moves to the pool's end with twice its room, and a full pool is compacted into
+one of twice the live size, so memory follows what was learned (not the widest row times n)
+and a step never copies more than the rows it touches, amortised.
+
 Scales live in the log domain (``lg_a(m) = log g_a(m)``, ``ld_a = log D_a``) and each learned row
 keeps its own offset, so nothing overflows or underflows to 0/0 over millions of steps: the
 stable form of Eqs. 3-4 (docs/algorithm.md) without its dense rows. Only the rows a belief
@@ -61,8 +67,11 @@ class LazyTransitions:
         self._log_level = np.zeros((q, 0))
         self._learned_scale = np.zeros((q, 0))
         self._pad_scale = np.zeros((q, 0))
-        self._cols: list[ColArray] = [np.zeros((0, 0), dtype=np.int32) for _ in range(q)]
-        self._vals: list[FloatArray] = [np.zeros((0, 0)) for _ in range(q)]
+        self._start = np.zeros((q, 0), dtype=np.int64)  # each row's run in the pool
+        self._cap = np.zeros((q, 0), dtype=np.int64)
+        self._pool_cols: ColArray = np.zeros(0, dtype=np.int32)
+        self._pool_vals: FloatArray = np.zeros(0)
+        self._used = 0  # pool slots handed out to rows
         self._log_prior = math.log(config.prior)
         self._scratch = np.zeros(0, dtype=np.int64)  # see _learn
 
@@ -80,11 +89,10 @@ class LazyTransitions:
         self._offset = ensure_capacity(self._offset, n + 1, limit, axis=1)
         self._row_sum = ensure_capacity(self._row_sum, n + 1, limit, axis=1)
         self._nnz = ensure_capacity(self._nnz, n + 1, limit, axis=1)
+        self._start = ensure_capacity(self._start, n + 1, limit, axis=1)
+        self._cap = ensure_capacity(self._cap, n + 1, limit, axis=1)
         for name in ("_log_pad", "_log_level", "_learned_scale", "_pad_scale"):
             setattr(self, name, ensure_capacity(getattr(self, name), n + 1, limit, axis=1))
-        for a in range(self.n_actions):
-            self._cols[a] = ensure_capacity(self._cols[a], n + 1, limit)
-            self._vals[a] = ensure_capacity(self._vals[a], n + 1, limit)
         self._created[:, n] = -self._log_decay
         self._offset[:, n] = -self._log_decay
         self._n = n + 1
@@ -129,17 +137,37 @@ class LazyTransitions:
         if self._scratch.shape[0] < self._n:
             self._scratch = np.zeros(self.max_states, dtype=np.int64)
         while True:
-            needed = _learn(a, self.config.learning_rate, prev.index, prev.prob, belief.index,
-                            belief.prob, self._log_decay, self._offset[a], self._row_sum[a],
-                            self._nnz[a], self._log_pad[a], self._log_level[a],
-                            self._learned_scale[a], self._pad_scale[a], self._cols[a],
-                            self._vals[a], self._scratch)
-            if not needed:
+            used = _learn(a, self.config.learning_rate, prev.index, prev.prob, belief.index,
+                          belief.prob, self._log_decay, self._offset[a], self._row_sum[a],
+                          self._nnz[a], self._start[a], self._cap[a], self._log_pad[a],
+                          self._log_level[a], self._learned_scale[a], self._pad_scale[a],
+                          self._pool_cols, self._pool_vals, self._used, self._scratch)
+            if used >= 0:
+                self._used = used
                 return
-            width = self._vals[a].shape[1]  # rows widen slowly: grow by 25%
-            new_width = max(needed, width + width // 4, 8)
-            self._cols[a] = ensure_capacity(self._cols[a], new_width, new_width, axis=1)
-            self._vals[a] = ensure_capacity(self._vals[a], new_width, new_width, axis=1)
+            self._compact(-used)
+
+    def _compact(self, extra: int) -> None:
+        """Move every row, in action and state order, into a pool of twice the live room
+        plus ``extra`` (rows keep their room)."""
+        n = self._n
+        live = int(self._cap[:, :n].sum())
+        size = max(2 * (live + extra), 64)
+        cols = np.zeros(size, dtype=np.int32)
+        vals = np.zeros(size)
+        self._used = _compact(self._start[:, :n], self._cap[:, :n], self._nnz[:, :n],
+                              self._pool_cols, self._pool_vals, cols, vals)
+        self._pool_cols, self._pool_vals = cols, vals
+
+    def _entries(self, a: int) -> tuple[IntArray, ColArray, FloatArray]:
+        """Action ``a``'s learned entries in row order, each row's in the order learned:
+        rows, columns and values."""
+        n = self._n
+        nnz = self._nnz[a, :n]
+        rows = np.repeat(np.arange(n), nnz)
+        at = np.repeat(self._start[a, :n], nnz) + (np.arange(rows.size)
+                                                   - np.repeat(np.cumsum(nnz) - nnz, nnz))
+        return rows, self._pool_cols[at], self._pool_vals[at]
 
     def predict(self, belief: Belief, action_bin: int, transpose: bool) -> FloatArray:
         """Eq. 5: ``P^T p`` when ``transpose`` (A1), else the literal ``P p``."""
@@ -150,12 +178,9 @@ class LazyTransitions:
     def _predict_transposed(self, belief: Belief, a: int) -> FloatArray:
         n, rows, p = self._n, belief.index, belief.prob
         learned = p * self._learned_scale[a][rows]
-        vals = self._vals[a][rows] * learned[:, None]
-        if vals.size:  # weighted bincount is float64 already: asarray does not copy
-            cols = self._cols[a][rows].ravel()
-            pred = np.asarray(np.bincount(cols, weights=vals.ravel(), minlength=n), np.float64)
-        else:
-            pred = np.zeros(n)
+        pred = np.zeros(n)
+        _add_learned(rows, learned, self._start[a], self._nnz[a], self._pool_cols,
+                     self._pool_vals, pred)
         c = p * self._pad_scale[a][rows]
         mode = self.config.expansion
         if mode == "prior":
@@ -183,16 +208,10 @@ class LazyTransitions:
             return marginal_by_action(self, belief, transpose)
         n, q, rows, p = self._n, self.n_actions, belief.index, belief.prob
         learned = p * self._learned_scale[:, rows]  # (q, k)
-        # the belief rows of every action side by side, and one weighted bincount over
-        # (action, column) bins: it sums each action's entries in the order its own would
-        widths = [v.shape[1] for v in self._vals]
-        vals = np.concatenate([v.take(rows, axis=0) for v in self._vals], axis=1)
-        vals *= learned.T.repeat(widths, axis=1)
-        bins = np.concatenate([c.take(rows, axis=0) for c in self._cols], axis=1)
-        bins += (np.arange(q, dtype=np.int32) * n).repeat(widths)
-        # (with nothing learned yet bincount answers in integers)
-        counts = np.bincount(bins.ravel(), weights=vals.ravel(), minlength=q * n)
-        pred: FloatArray = counts.astype(np.float64, copy=False).reshape(q, n)
+        pred = np.zeros((q, n))
+        for a in range(q):  # each action's entries summed in the order its own would be
+            _add_learned(rows, learned[a], self._start[a], self._nnz[a], self._pool_cols,
+                         self._pool_vals, pred[a])
         c = p * self._pad_scale[:, rows]
         mode = self.config.expansion
         if mode == "prior":
@@ -215,8 +234,9 @@ class LazyTransitions:
     def _predict_literal(self, belief: Belief, a: int) -> FloatArray:
         n = self._n
         p = belief.dense(n)
-        vals, cols = self._vals[a][:n], self._cols[a][:n]
-        pred: FloatArray = (vals * p[cols]).sum(axis=1) * self._learned_scale[a, :n]
+        pred = np.empty(n)
+        _dot_rows(p, self._start[a], self._nnz[a], self._pool_cols, self._pool_vals, pred)
+        pred *= self._learned_scale[a, :n]
         mode = self.config.expansion
         scale = self._pad_scale[a, :n]
         if mode == "prior":
@@ -231,7 +251,8 @@ class LazyTransitions:
     def reset_row(self, state: int) -> None:
         """A16 ``reset``: drop the learned mass of a moved state; its padding stays."""
         for a in range(self.n_actions):
-            self._vals[a][state] = 0.0
+            start = self._start[a, state]
+            self._pool_vals[start : start + self._nnz[a, state]] = 0.0
             self._nnz[a, state] = 0
             self._row_sum[a, state] = 0.0
             self._offset[a, state] = -self._log_decay[a]
@@ -251,9 +272,8 @@ class LazyTransitions:
         else:
             shape = np.tril(np.ones((n, n))) if mode == "zero_uniform" else np.eye(n)
             out = shape * scale[:, None]
-        learned = self._vals[a][:n] * self._learned_scale[a, :n, None]
-        np.add.at(out, (np.repeat(rows, learned.shape[1]), self._cols[a][:n].ravel()),
-                  learned.ravel())
+        at, cols, vals = self._entries(a)
+        np.add.at(out, (at, cols), vals * self._learned_scale[a, at])
         return out
 
     def row_mass(self, action_bin: int) -> FloatArray:
@@ -271,7 +291,7 @@ class LazyTransitions:
         arrays: list[npt.NDArray[Any]] = [
             self._created, self._pad, self._pad_tail, self._offset, self._row_sum, self._nnz,
             self._log_pad, self._log_level, self._learned_scale, self._pad_scale,
-            self._scratch, *self._cols, *self._vals,
+            self._scratch, self._start, self._cap, self._pool_cols, self._pool_vals,
         ]
         return sum(int(x.nbytes) for x in arrays)
 
@@ -280,16 +300,16 @@ class LazyTransitions:
         n = self._n
         actions = []
         for a in range(self.n_actions):
-            width = self._vals[a].shape[1]
-            valid = np.arange(width)[None, :] < self._nnz[a, :n, None]
+            _, cols, vals = self._entries(a)
+            nnz = self._nnz[a, :n].copy()
             actions.append(
                 {
-                    "width": width,
-                    "nnz": self._nnz[a, :n].copy(),
+                    "width": int(nnz.max(initial=0)),  # the widest row
+                    "nnz": nnz,
                     "offset": self._offset[a, :n].copy(),
                     "row_sum": self._row_sum[a, :n].copy(),
-                    "cols": self._cols[a][:n][valid],
-                    "vals": self._vals[a][:n][valid],
+                    "cols": cols,
+                    "vals": vals,
                 }
             )
         return {
@@ -317,9 +337,12 @@ class LazyTransitions:
         self._offset = np.zeros((q, n))
         self._row_sum = np.zeros((q, n))
         self._nnz = np.zeros((q, n), dtype=np.int64)
+        self._cap = np.zeros((q, n), dtype=np.int64)
         for name in ("_log_pad", "_log_level", "_learned_scale", "_pad_scale"):
             setattr(self, name, np.zeros((q, n)))
         entries = data["actions"]
+        pool_cols: list[ColArray] = []
+        pool_vals: list[FloatArray] = []
         if not isinstance(entries, list) or len(entries) != q:
             raise InvalidSnapshot(f"expected one entry per action ({q})",
                                   field="transitions.actions")
@@ -335,14 +358,16 @@ class LazyTransitions:
             cols = stored.ints(entry["cols"], f"{field}.cols", (total,), high=max(n - 1, 0),
                                dtype=np.int32)
             vals = stored.floats(entry["vals"], f"{field}.vals", (total,), low=0.0)
-            valid = np.arange(width)[None, :] < nnz[:, None]
-            self._cols[a] = np.zeros((n, width), dtype=np.int32)
-            self._vals[a] = np.zeros((n, width))
-            self._cols[a][valid] = cols
-            self._vals[a][valid] = vals
-            rows = np.sort(np.where(valid, self._cols[a], -1 - np.arange(width)), axis=1)
-            if (rows[:, 1:] == rows[:, :-1]).any():
+            keys = np.repeat(np.arange(n, dtype=np.int64), nnz) * max(n, 1) + cols
+            if np.unique(keys).size != total:
                 raise InvalidSnapshot("a row names a next state twice", field=f"{field}.cols")
+            self._cap[a] = nnz
+            pool_cols.append(cols)
+            pool_vals.append(vals)
+        self._pool_cols = np.concatenate([np.zeros(0, dtype=np.int32), *pool_cols])
+        self._pool_vals = np.concatenate([np.zeros(0), *pool_vals])
+        self._used = self._pool_vals.size
+        self._start = (np.cumsum(self._cap.ravel()) - self._cap.ravel()).reshape(q, n)
         self._refresh()
         return self
 
@@ -374,23 +399,37 @@ def _suffix_sums(x: FloatArray) -> FloatArray:
 @njit(cache=True)
 def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
            gamma: FloatArray, log_decay: FloatArray, offset: FloatArray, row_sum: FloatArray,
-           nnz: IntArray, log_pad: FloatArray, log_level: FloatArray,
-           learned_scale: FloatArray, pad_scale: FloatArray, stored_cols: ColArray,
-           vals: FloatArray, slots: IntArray) -> int:
-    """:meth:`LazyTransitions.learn_one` on action ``a``'s arrays. Returns 0 when done, or,
-    changing nothing, the row width it needs when a row has no room for its new entries.
+           nnz: IntArray, start: IntArray, cap: IntArray, log_pad: FloatArray,
+           log_level: FloatArray, learned_scale: FloatArray, pad_scale: FloatArray,
+           pool_cols: ColArray, pool_vals: FloatArray, used: int, slots: IntArray) -> int:
+    """:meth:`LazyTransitions.learn_one` on action ``a``'s rows. Returns the pool slots in
+    use after it, or, changing nothing, minus the slots it needs at the pool's end when the
+    rows that must move there (to twice their room) do not fit.
 
     ``slots`` is a zeroed scratch map column -> slot + 1, filled for one row at a time and
     cleared again, so that finding the entries costs O(k W) whatever n is.
     """
-    width = vals.shape[1]
-    fullest = 0
-    for i in range(rows.shape[0]):
-        fullest = max(fullest, nnz[rows[i]])
-    if fullest + cols.shape[0] > width:  # first, without changing anything: is there room?
-        needed = _width_needed(rows, cols, nnz, stored_cols, slots)
-        if needed > width:
-            return needed
+    extra = 0
+    for i in range(rows.shape[0]):  # first, without changing anything: is there room?
+        row = rows[i]
+        if nnz[row] + cols.shape[0] > cap[row]:
+            needed = _row_needs(row, cols, nnz, start, pool_cols, slots)
+            if needed > cap[row]:
+                extra += max(needed, 2 * cap[row], 4)
+    if used + extra > pool_vals.shape[0]:
+        return -extra
+    if extra:
+        for i in range(rows.shape[0]):  # rows without room move to the end, in order
+            row = rows[i]
+            if nnz[row] + cols.shape[0] > cap[row]:
+                needed = _row_needs(row, cols, nnz, start, pool_cols, slots)
+                if needed > cap[row]:
+                    room = max(needed, 2 * cap[row], 4)
+                    for s in range(nnz[row]):
+                        pool_cols[used + s] = pool_cols[start[row] + s]
+                        pool_vals[used + s] = pool_vals[start[row] + s]
+                    start[row], cap[row] = used, room
+                    used += room
     step = log_decay[a] + math.log1p(-lr)
     log_decay[a] = step
     base = -step  # the touched rows' new offset
@@ -405,41 +444,80 @@ def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
         log_norm = logaddexp(log_pad[row], base + log_learned)
         learned_scale[row] = math.exp(base - log_norm)
         pad_scale[row] = math.exp(log_level[row] - log_norm)
-        count = nnz[row]
-        for s in range(width):
-            vals[row, s] *= factor
-        for s in range(count):
-            slots[stored_cols[row, s]] = s + 1
+        first, count = start[row], nnz[row]
+        for s in range(first, first + count):
+            pool_vals[s] *= factor
+            slots[pool_cols[s]] = s - first + 1
         for j in range(cols.shape[0]):
             contrib = lr * tau[i] * gamma[j]
             slot = slots[cols[j]] - 1
             if slot >= 0:
-                vals[row, slot] += contrib
+                pool_vals[first + slot] += contrib
             else:
-                stored_cols[row, count] = cols[j]
-                vals[row, count] = contrib
+                pool_cols[first + count] = cols[j]
+                pool_vals[first + count] = contrib
                 count += 1
-        for s in range(nnz[row]):
-            slots[stored_cols[row, s]] = 0
+        for s in range(first, first + nnz[row]):
+            slots[pool_cols[s]] = 0
         nnz[row] = count
-    return 0
+    return used
 
 
 @njit(cache=True)
-def _width_needed(rows: IntArray, cols: IntArray, nnz: IntArray, stored_cols: ColArray,
-                  slots: IntArray) -> int:
-    """The most entries a touched row will hold once ``cols`` are in it (``slots`` zeroed
-    before and after, as in :func:`_learn`)."""
-    needed = 0
-    for i in range(rows.shape[0]):
-        row = rows[i]
-        count = nnz[row]
-        for s in range(count):
-            slots[stored_cols[row, s]] = s + 1
-        for j in range(cols.shape[0]):
-            if slots[cols[j]] == 0:
-                count += 1
-        for s in range(nnz[row]):
-            slots[stored_cols[row, s]] = 0
-        needed = max(needed, count)
+def _row_needs(row: int, cols: IntArray, nnz: IntArray, start: IntArray, pool_cols: ColArray,
+               slots: IntArray) -> int:
+    """How many entries ``row`` holds once ``cols`` are in it (``slots`` zeroed before and
+    after, as in :func:`_learn`)."""
+    first, count = start[row], nnz[row]
+    for s in range(first, first + count):
+        slots[pool_cols[s]] = 1
+    needed = count
+    for j in range(cols.shape[0]):
+        if slots[cols[j]] == 0:
+            needed += 1
+    for s in range(first, first + count):
+        slots[pool_cols[s]] = 0
     return needed
+
+
+@njit(cache=True)
+def _compact(start: IntArray, cap: IntArray, nnz: IntArray, pool_cols: ColArray,
+             pool_vals: FloatArray, new_cols: ColArray, new_vals: FloatArray) -> int:
+    """Copy every row (actions x states) into the new pool, in order, each keeping its room;
+    ``start`` is updated. Returns the slots in use."""
+    used = 0
+    for a in range(start.shape[0]):
+        for row in range(start.shape[1]):
+            first = start[a, row]
+            for s in range(nnz[a, row]):
+                new_cols[used + s] = pool_cols[first + s]
+                new_vals[used + s] = pool_vals[first + s]
+            start[a, row] = used
+            used += cap[a, row]
+    return used
+
+
+@njit(cache=True)
+def _add_learned(rows: IntArray, weights: FloatArray, start: IntArray, nnz: IntArray,
+                 pool_cols: ColArray, pool_vals: FloatArray, out: FloatArray) -> None:
+    """``out[j] += weight_i * vals(i, j)`` over the rows, in row and slot order (the order of
+    a weighted bincount of the rows' entries laid side by side)."""
+    for i in range(rows.shape[0]):
+        row, weight = rows[i], weights[i]
+        for s in range(start[row], start[row] + nnz[row]):
+            out[pool_cols[s]] += pool_vals[s] * weight
+
+
+@njit(cache=True)
+def _dot_rows(p: FloatArray, start: IntArray, nnz: IntArray, pool_cols: ColArray,
+              pool_vals: FloatArray, out: FloatArray) -> None:
+    """``out[i] = sum_s vals(i, s) p[cols(i, s)]`` for every row, summed in numpy's order."""
+    widest = 0
+    for i in range(out.shape[0]):
+        widest = max(widest, nnz[i])
+    terms = np.empty(widest)
+    for i in range(out.shape[0]):
+        count = nnz[i]
+        for s in range(count):
+            terms[s] = pool_vals[start[i] + s] * p[pool_cols[start[i] + s]]
+        out[i] = numpy_sum(terms, count)

@@ -201,3 +201,30 @@ def test_the_marginal_step_matches_the_loop_bit_for_bit_at_the_experiments_size(
         belief = top_k(rng.random(lazy.n_states) ** 4, 16)
         np.testing.assert_array_equal(lazy.predict_marginal(belief, True),
                                       marginal_by_action(lazy, belief, True))
+
+
+def test_memory_follows_what_was_learned_not_the_widest_row() -> None:
+    """One state moves to many; the others to one each. The learned entries share one pool,
+    so the wide row does not make every row as wide (a padded n x width layout would hold
+    n * 1000 entries per action), and every row still predicts as the dense model does."""
+    n, q = 1000, 2
+    cfg = TransitionConfig()
+    lazy, dense = LazyTransitions(q, cfg, n), DenseTransitions(q, cfg)
+    for _ in range(n):
+        lazy.add_state()
+        dense.add_state()
+    for j in range(n):  # state 0 moves everywhere, one at a time: its row moves and grows
+        lazy.learn_one(one_hot(0), 0, one_hot(j))
+        dense.learn_one(one_hot(0), 0, one_hot(j))
+    for i in range(1, n):
+        lazy.learn_one(one_hot(i), 1, one_hot((i + 1) % n))
+        dense.learn_one(one_hot(i), 1, one_hot((i + 1) % n))
+    entries = 2 * n  # what was learned
+    assert lazy.nbytes() < 400 * entries  # the per-state scales and an amortised pool
+    for a in range(q):
+        for i in (0, 1, n - 1):
+            np.testing.assert_allclose(lazy.predict(one_hot(i), a, False),
+                                       dense.predict(one_hot(i), a, False), rtol=1e-9)
+    copy = LazyTransitions.restore(q, cfg, n, lazy.snapshot())
+    np.testing.assert_array_equal(copy.predict(one_hot(0), 0, True),
+                                  lazy.predict(one_hot(0), 0, True))
