@@ -471,7 +471,7 @@ def _row_needs(row: int, cols: IntArray, nnz: IntArray, start: IntArray, pool_co
     first, count = start[row], nnz[row]
     for s in range(first, first + count):
         slots[pool_cols[s]] = 1
-    needed = count
+    needed: int = count
     for j in range(cols.shape[0]):
         if slots[cols[j]] == 0:
             needed += 1
