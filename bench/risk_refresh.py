@@ -60,12 +60,13 @@ def measure(n: int, rounds: int, horizon: int) -> tuple[int, float, float, int]:
     prob = np.full(index.size, 1.0 / index.size)
     safe = safe_steps(DIRECTIONS)
     by_bin = np.empty((ACTIONS, CRITERIA))
+    verdicts = np.empty(ACTIONS, dtype=np.int64)
 
     def refresh() -> None:
         horizon_risk(counts.tries, counts.failures, moves, DIRECTIONS, horizon, 1.0)
 
     def read() -> None:
-        decide(table, index, prob, 15, 0.0, 0.001, safe, by_bin)
+        decide(table, index, prob, 15, 0.0, 0.001, safe, by_bin, verdicts)
 
     refreshes = [timed(refresh, 3) for _ in range(rounds)]
     reads = [timed(read, 2000) for _ in range(rounds)]

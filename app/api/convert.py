@@ -2,25 +2,25 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import orjson
 
 from app.api.schemas import ReviseRequest
+from app.core import Decision
 from app.service.registry import Step
 
 
 def to_json(content: Any) -> bytes:
-    """Decision records (and whatever holds them) as JSON: orjson writes the records'
-    dataclasses as :meth:`Decision.to_dict` would, several times faster than the standard
-    library; the candidates the risk reviser builds on demand go out as a list."""
-    return orjson.dumps(content, default=_listed)
+    """Decision records (and whatever holds them) as JSON: each record as
+    :meth:`Decision.to_dict` writes it (plain dicts, which orjson writes several times faster
+    than the records' dataclasses)."""
+    return orjson.dumps(content, default=_plain, option=orjson.OPT_PASSTHROUGH_DATACLASS)
 
 
-def _listed(value: Any) -> list[Any]:
-    if isinstance(value, Sequence):
-        return list(value)
+def _plain(value: Any) -> dict[str, Any]:
+    if isinstance(value, Decision):
+        return value.to_dict()
     raise TypeError(f"{type(value).__name__} is not JSON")
 
 

@@ -295,12 +295,14 @@ def choose(total: FloatArray, proposed_bin: int, limit: float, safe_step: int
 
 @njit(cache=True)
 def decide(table: FloatArray, index: IntArray, prob: FloatArray, proposed_bin: int,
-           threshold: float, margin: float, safe: IntArray, by_bin: FloatArray
-           ) -> tuple[float, int, int, bool]:
+           threshold: float, margin: float, safe: IntArray, by_bin: FloatArray,
+           verdicts: IntArray) -> tuple[float, int, int, bool]:
     """One step of the risk reviser on the table: ``by_bin`` (actions x criteria) gets the
-    risk under the belief, ``sum_i belief_i Q(i, a)``; returns the limit (:func:`kept_limit`),
-    the proposal's riskiest criterion, the bin to apply (:func:`choose`, towards that
-    criterion's safe side) and whether that is the proposal because it is within the limit."""
+    risk under the belief, ``sum_i belief_i Q(i, a)``, and ``verdicts`` each bin's: -1 within
+    the limit (:func:`kept_limit`), else its riskiest criterion (the first of equals).
+    Returns the limit, the proposal's verdict, the bin to apply (:func:`choose`, towards the
+    safe side of the proposal's riskiest criterion) and whether that is the proposal because
+    it is within the limit."""
     q, n_c = by_bin.shape
     total = np.empty(q)
     for a in range(q):
@@ -313,11 +315,16 @@ def decide(table: FloatArray, index: IntArray, prob: FloatArray, proposed_bin: i
         for c in range(1, n_c):
             total[a] += by_bin[a, c]
     limit = kept_limit(total, threshold, margin)
-    worst = 0
-    for c in range(1, n_c):
-        if by_bin[proposed_bin, c] > by_bin[proposed_bin, worst]:
-            worst = c
+    for a in range(q):
+        worst = 0
+        for c in range(1, n_c):
+            if by_bin[a, c] > by_bin[a, worst]:
+                worst = c
+        verdicts[a] = -1 if total[a] <= limit else worst
     kept = total[proposed_bin] <= limit
+    worst = verdicts[proposed_bin]
+    if kept:
+        return limit, worst, proposed_bin, kept
     return limit, worst, choose(total, proposed_bin, limit, safe[worst]), kept
 
 

@@ -57,29 +57,34 @@ class Candidate:
 
 class RiskCandidates(Sequence[Candidate]):
     """The bins the risk reviser passed over, from the proposal's neighbour to the bin
-    applied, built on first use from the step's risk per bin (most callers never read them).
-    """
+    applied, built on first use from the step's risk and verdict per bin (most callers never
+    read them)."""
 
-    def __init__(self, bins: range, by_bin: FloatArray, limit: float,
+    def __init__(self, bins: range, by_bin: FloatArray, verdicts: npt.NDArray[np.int64],
                  names: Sequence[str], action: ActionSpec) -> None:
-        self._bins, self._by_bin, self._limit = bins, by_bin, limit
+        self._bins, self._by_bin, self._verdicts = bins, by_bin, verdicts
         self._names, self._action = names, action
         self._built: tuple[Candidate, ...] | None = None
 
     def _all(self) -> tuple[Candidate, ...]:
         if self._built is None:
-            names, rows, built = self._names, self._by_bin.tolist(), []
-            for r in self._bins:
-                risk = rows[r]
-                total = risk[0]
-                for value in risk[1:]:  # summed in the order the decision summed them
-                    total += value
-                worst = risk.index(max(risk))
-                built.append(Candidate(actions.decode(r, self._action), r,
-                                       "ok" if total <= self._limit else names[worst],
-                                       dict(zip(names, risk, strict=True))))
-            self._built = tuple(built)
+            names, rows, verdicts = self._names, self._by_bin.tolist(), self._verdicts.tolist()
+            low, width = self._action.low, self._action.step
+            self._built = tuple(
+                Candidate(low + (r + 0.5) * width, r,  # actions.decode(r)
+                          "ok" if verdicts[r] < 0 else names[verdicts[r]],
+                          dict(zip(names, rows[r], strict=True)))
+                for r in self._bins)
         return self._built
+
+    def records(self) -> list[dict[str, Any]]:
+        """The candidates as JSON-able records (what :meth:`Decision.to_dict` writes), made
+        straight from the arrays: the service's per-step path."""
+        names, rows, verdicts = self._names, self._by_bin.tolist(), self._verdicts.tolist()
+        low, width = self._action.low, self._action.step
+        return [{"action": low + (r + 0.5) * width, "bin": r,
+                 "verdict": "ok" if verdicts[r] < 0 else names[verdicts[r]],
+                 "risk": dict(zip(names, rows[r], strict=True))} for r in self._bins]
 
     def __iter__(self) -> Iterator[Candidate]:
         return iter(self._all())
@@ -131,8 +136,10 @@ class Decision:
             "action": self.action, "proposed": self.proposed, "revised": self.revised,
             "reason": self.reason, "verdict": self.verdict, "risk": self.risk,
             "threshold": self.threshold,
-            "candidates": [{"action": c.action, "bin": c.bin, "verdict": c.verdict,
-                            "risk": c.risk} for c in self.candidates],
+            "candidates": (
+                self.candidates.records() if isinstance(self.candidates, RiskCandidates)
+                else [{"action": c.action, "bin": c.bin, "verdict": c.verdict, "risk": c.risk}
+                      for c in self.candidates]),
             "state": self.state, "n_states": self.n_states, "new_state": self.new_state,
             "episode": self.episode, "step": self.step, "model_version": self.model_version,
             "stream": self.stream, "shadow": self.shadow, "suggested": self.suggested,
@@ -564,9 +571,10 @@ class Shield:
         else:
             start = actions.encode(proposed, cfg.action)
             by_bin = np.empty((cfg.action.n_bins, len(names)))
+            verdicts = np.empty(cfg.action.n_bins, dtype=np.int64)
             limit, worst, final, kept = risk.decide(
                 self._risk_table, belief.index, belief.prob, start, cfg.risk.threshold,
-                cfg.risk.margin, self._safe_steps, by_bin)
+                cfg.risk.margin, self._safe_steps, by_bin, verdicts)
             risks = dict(zip(names, by_bin[start].tolist(), strict=True))
             verdict = "ok" if kept else names[worst]
             if self.counters.episodes < cfg.reviser.activate_after_episodes:
@@ -576,7 +584,7 @@ class Shield:
             else:
                 way = 1 if final > start else -1
                 candidates = RiskCandidates(range(start + way, final + way, way), by_bin,
-                                            limit, names, cfg.action)
+                                            verdicts, names, cfg.action)
                 suggested = actions.decode(final, cfg.action)
                 action = proposed if step.shadow else suggested
                 reason = "revised_safety" if final < start else "revised_speed"

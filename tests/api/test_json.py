@@ -1,14 +1,16 @@
-"""Decision records leave the service as orjson writes them: the same JSON as
-:meth:`Decision.to_dict` through the standard library, revisions with candidates included."""
+"""Decision records leave the service as orjson writes them: the same JSON as the record's
+fields (its candidates' fields) through the standard library, revisions included."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+from typing import Any
 
 import orjson
 
 from app.api.convert import to_json
-from app.core import Shield
+from app.core import Decision, Shield
 from tests.core.recorded import preset
 
 
@@ -22,5 +24,14 @@ def test_orjson_writes_the_records_to_dict_does() -> None:
             decision = shield.step([10.0, 40.0 - x, 10.0], None if event else 2.0,
                                    event=event, done=event is not None)
             revised += decision.revised
-            assert orjson.loads(to_json(decision)) == json.loads(json.dumps(decision.to_dict()))
+            written = orjson.loads(to_json(decision))
+            assert written == json.loads(json.dumps(fields(decision)))
+            assert orjson.loads(to_json({"decisions": [decision]})) == {"decisions": [written]}
         assert revised, name  # the candidates of revisions were written too
+
+
+def fields(decision: Decision) -> dict[str, Any]:
+    """The record's dataclass fields, each candidate's too, read one by one."""
+    data = {f.name: getattr(decision, f.name) for f in dataclasses.fields(decision)}
+    data["candidates"] = [dataclasses.asdict(c) for c in decision.candidates]
+    return data

@@ -141,10 +141,12 @@ def test_decide_reads_the_belief_risk_and_chooses_on_the_safe_side() -> None:
     table[1, 0, 1] = 0.6  # state 1: braking falls behind
     by_bin = np.empty((3, 2))
     index, prob = np.array([0, 1]), np.array([0.75, 0.25])
+    verdicts = np.empty(3, dtype=np.int64)
     limit, worst, final, kept = decide(table, index, prob, 2, 0.0, 0.001, safe_steps(
-        ["decrease", "increase"]), by_bin)
+        ["decrease", "increase"]), by_bin, verdicts)
     np.testing.assert_allclose(by_bin, [[0.0, 0.15], [0.0, 0.0], [0.6, 0.0]], atol=1e-15)
     assert limit == pytest.approx(0.001) and worst == 0 and final == 1 and not kept
+    assert verdicts.tolist() == [1, -1, 0]  # falling behind, within the limit, collision
 
 
 def crash_world(shield: Shield, episodes: int, seed: int) -> int:
