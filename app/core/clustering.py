@@ -17,6 +17,7 @@ from numba import njit
 
 from app.core import _stored as stored
 from app.core._arrays import ensure_capacity
+from app.core.belief import Belief, _recognise
 from app.core.config import ClusteringConfig
 from app.core.errors import InvalidSnapshot
 
@@ -125,6 +126,29 @@ class EvolvingClusterer:
             return StateUpdate("new", index, d2)
         return StateUpdate(_KINDS[kind], index, d2[:n])
 
+    def learn_and_recognise(self, z: FloatArray, k: int) -> tuple[StateUpdate, Belief]:
+        """:meth:`learn_one`, then the belief over the states after it (Eq. 1, top ``k``):
+        one compiled call, the step's first."""
+        cfg = self.config
+        n = self._n
+        if n == self._centres.shape[0]:
+            self._reserve(n + 1)
+        self.k += 1
+        d2 = np.empty(n + 1)
+        index = np.empty(min(n + 1, k), dtype=np.int64)
+        prob = np.empty(index.shape[0])
+        kind, at, self.sigma, hit, m = _learn_and_recognise(
+            z, self.k, self.beta, self.sigma, self._centres, self._sq_norms, self._potentials,
+            self._radii, self._support, self._scatter, self._variances, n, self.max_states,
+            cfg.epsilon, cfg.rho, cfg.creation_rule == "ets_plus", _SPREADS[cfg.spread],
+            cfg.min_variance, d2, k, index, prob)
+        self.capacity_hits += hit
+        if kind == NEW:
+            self._n = n + 1
+        else:
+            d2 = d2[:n]
+        return StateUpdate(_KINDS[kind], at, d2), Belief(index[:m], prob[:m])
+
     def _reserve(self, needed: int) -> None:
         limit = self.max_states
         self._centres = ensure_capacity(self._centres, needed, limit)
@@ -205,6 +229,25 @@ def _sq_distances(centres: FloatArray, sq_norms: FloatArray, n: int, z: FloatArr
             dot += centres[i, j] * z[j]
         d2 = sq_norms[i] - 2.0 * dot + theta
         out[i] = d2 if d2 > 0.0 else 0.0
+
+
+@njit(cache=True)
+def _learn_and_recognise(z: FloatArray, k: int, beta: FloatArray, sigma: float,
+                         centres: FloatArray, sq_norms: FloatArray, potentials: FloatArray,
+                         radii: FloatArray, support: npt.NDArray[np.int64], scatter: FloatArray,
+                         variances: FloatArray, n: int, max_states: int, epsilon: float,
+                         rho: float, ets_plus: bool, spread: int, min_variance: float,
+                         d2: FloatArray, top: int, index: npt.NDArray[np.int64],
+                         prob: FloatArray) -> tuple[int, int, float, int, int]:
+    """:func:`_learn`, then :func:`~app.core.belief._recognise` on the states after it:
+    the update's kind, the state it touched, the new sigma, whether a candidate met the
+    state limit, and the belief's size (in ``index`` and ``prob``)."""
+    kind, at, sigma, hit = _learn(z, k, beta, sigma, centres, sq_norms, potentials, radii,
+                                  support, scatter, variances, n, max_states, epsilon, rho,
+                                  ets_plus, spread, min_variance, d2)
+    states = n + 1 if kind == NEW else n
+    m = _recognise(d2[:states], variances[:states], top, index, prob)
+    return kind, at, sigma, hit, m
 
 
 @njit(cache=True)

@@ -352,15 +352,12 @@ class Shield:
             return self._what_if(step)
         cfg = self.config
         z = self.normalise(step.observation)
-        # clustering: a new state expands every TPM
-        update = self.clusterer.learn_one(z)
-        if update.is_new:
+        # clustering, then Eq. 1 recognition on the states after it
+        update, belief = self.clusterer.learn_and_recognise(z, cfg.limits.belief_top_k)
+        if update.is_new:  # a new state expands every TPM
             self._add_state()
         elif update.kind == "replaced" and cfg.transitions.on_replace == "reset":
             self.transitions.reset_row(update.index)  # A16
-        # Eq. 1 recognition, after clustering
-        belief = recognise(update.sq_distances, self.clusterer.variances(),
-                           cfg.limits.belief_top_k)
         # Eqs. 3-4 for the stream's previous step, under the action behind the transition
         state = self._stream(step.stream)
         self._learn_transition(state, belief, update.is_new, step.applied_action)
