@@ -138,10 +138,10 @@ class LazyTransitions:
             self._scratch = np.zeros(self.max_states, dtype=np.int64)
         while True:
             used = _learn(a, self.config.learning_rate, prev.index, prev.prob, belief.index,
-                          belief.prob, self._log_decay, self._offset[a], self._row_sum[a],
-                          self._nnz[a], self._start[a], self._cap[a], self._log_pad[a],
-                          self._log_level[a], self._learned_scale[a], self._pad_scale[a],
-                          self._pool_cols, self._pool_vals, self._used, self._scratch)
+                          belief.prob, self._log_decay, self._offset, self._row_sum, self._nnz,
+                          self._start, self._cap, self._log_pad, self._log_level,
+                          self._learned_scale, self._pad_scale, self._pool_cols,
+                          self._pool_vals, self._used, self._scratch)
             if used >= 0:
                 self._used = used
                 return
@@ -402,9 +402,10 @@ def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
            nnz: IntArray, start: IntArray, cap: IntArray, log_pad: FloatArray,
            log_level: FloatArray, learned_scale: FloatArray, pad_scale: FloatArray,
            pool_cols: ColArray, pool_vals: FloatArray, used: int, slots: IntArray) -> int:
-    """:meth:`LazyTransitions.learn_one` on action ``a``'s rows. Returns the pool slots in
-    use after it, or, changing nothing, minus the slots it needs at the pool's end when the
-    rows that must move there (to twice their room) do not fit.
+    """:meth:`LazyTransitions.learn_one` on action ``a``'s rows (the per-row arrays are
+    actions x states). Returns the pool slots in use after it, or, changing nothing, minus
+    the slots it needs at the pool's end when the rows that must move there (to twice their
+    room) do not fit.
 
     ``slots`` is a zeroed scratch map column -> slot + 1, filled for one row at a time and
     cleared again, so that finding the entries costs O(k W) whatever n is.
@@ -412,23 +413,23 @@ def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
     extra = 0
     for i in range(rows.shape[0]):  # first, without changing anything: is there room?
         row = rows[i]
-        if nnz[row] + cols.shape[0] > cap[row]:
-            needed = _row_needs(row, cols, nnz, start, pool_cols, slots)
-            if needed > cap[row]:
-                extra += max(needed, 2 * cap[row], 4)
+        if nnz[a, row] + cols.shape[0] > cap[a, row]:
+            needed = _row_needs(nnz[a, row], start[a, row], cols, pool_cols, slots)
+            if needed > cap[a, row]:
+                extra += max(needed, 2 * cap[a, row], 4)
     if used + extra > pool_vals.shape[0]:
         return -extra
     if extra:
         for i in range(rows.shape[0]):  # rows without room move to the end, in order
             row = rows[i]
-            if nnz[row] + cols.shape[0] > cap[row]:
-                needed = _row_needs(row, cols, nnz, start, pool_cols, slots)
-                if needed > cap[row]:
-                    room = max(needed, 2 * cap[row], 4)
-                    for s in range(nnz[row]):
-                        pool_cols[used + s] = pool_cols[start[row] + s]
-                        pool_vals[used + s] = pool_vals[start[row] + s]
-                    start[row], cap[row] = used, room
+            if nnz[a, row] + cols.shape[0] > cap[a, row]:
+                needed = _row_needs(nnz[a, row], start[a, row], cols, pool_cols, slots)
+                if needed > cap[a, row]:
+                    room = max(needed, 2 * cap[a, row], 4)
+                    for s in range(nnz[a, row]):
+                        pool_cols[used + s] = pool_cols[start[a, row] + s]
+                        pool_vals[used + s] = pool_vals[start[a, row] + s]
+                    start[a, row], cap[a, row] = used, room
                     used += room
     step = log_decay[a] + math.log1p(-lr)
     log_decay[a] = step
@@ -436,15 +437,15 @@ def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
     gamma_sum = numpy_sum(gamma, gamma.shape[0])
     for i in range(rows.shape[0]):
         row = rows[i]
-        factor = math.exp(offset[row] + step)  # <= 1
-        offset[row] = base
-        learned = row_sum[row] * factor + lr * tau[i] * gamma_sum
-        row_sum[row] = learned
+        factor = math.exp(offset[a, row] + step)  # <= 1
+        offset[a, row] = base
+        learned = row_sum[a, row] * factor + lr * tau[i] * gamma_sum
+        row_sum[a, row] = learned
         log_learned = math.log(learned) if learned > 0.0 else NEG_INF
-        log_norm = logaddexp(log_pad[row], base + log_learned)
-        learned_scale[row] = math.exp(base - log_norm)
-        pad_scale[row] = math.exp(log_level[row] - log_norm)
-        first, count = start[row], nnz[row]
+        log_norm = logaddexp(log_pad[a, row], base + log_learned)
+        learned_scale[a, row] = math.exp(base - log_norm)
+        pad_scale[a, row] = math.exp(log_level[a, row] - log_norm)
+        first, count = start[a, row], nnz[a, row]
         for s in range(first, first + count):
             pool_vals[s] *= factor
             slots[pool_cols[s]] = s - first + 1
@@ -457,18 +458,17 @@ def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
                 pool_cols[first + count] = cols[j]
                 pool_vals[first + count] = contrib
                 count += 1
-        for s in range(first, first + nnz[row]):
+        for s in range(first, first + nnz[a, row]):
             slots[pool_cols[s]] = 0
-        nnz[row] = count
+        nnz[a, row] = count
     return used
 
 
 @njit(cache=True)
-def _row_needs(row: int, cols: IntArray, nnz: IntArray, start: IntArray, pool_cols: ColArray,
-               slots: IntArray) -> int:
-    """How many entries ``row`` holds once ``cols`` are in it (``slots`` zeroed before and
-    after, as in :func:`_learn`)."""
-    first, count = start[row], nnz[row]
+def _row_needs(count: int, first: int, cols: IntArray, pool_cols: ColArray, slots: IntArray
+               ) -> int:
+    """How many entries a row of ``count`` entries from ``first`` holds once ``cols`` are in
+    it (``slots`` zeroed before and after, as in :func:`_learn`)."""
     for s in range(first, first + count):
         slots[pool_cols[s]] = 1
     needed: int = count
