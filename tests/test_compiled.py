@@ -28,3 +28,17 @@ def test_the_image_build_warms_the_cache() -> None:
     dockerfile = (Path(__file__).parents[1] / "Dockerfile").read_text()
     install = dockerfile.index('pip install --no-cache-dir ".[service]"')
     assert install < dockerfile.index("python -m app warm") < dockerfile.index("USER shield")
+
+
+def test_warm_leaves_nothing_to_compile_for_the_presets() -> None:
+    """After :func:`warm`, steps of every preset (learning, asking only, failing, ending)
+    and their snapshots call no kernel for types it was not compiled for."""
+    from app.core import Shield, compiled
+
+    compiled.warm()
+    before = {id(k): len(k.signatures) for k in compiled.kernels()}
+    for config in compiled.presets():
+        Shield.from_snapshot(compiled._drive(Shield(config)).snapshot())
+    grown = [k.py_func.__qualname__ for k in compiled.kernels()
+             if len(k.signatures) != before[id(k)]]
+    assert grown == []

@@ -44,12 +44,11 @@ def kernels() -> Iterator[CPUDispatcher]:
 
 
 def warm() -> WarmUp:
-    """Compile (or load) every kernel by running a small closed loop through each reviser,
-    with failures, episode ends and a snapshot round trip."""
+    """Compile (or load) every kernel by running a small closed loop through each preset,
+    with failures, episode ends, steps that only ask (``learn=False``) and a snapshot round
+    trip."""
     start = time.perf_counter()
-    for config in (ShieldConfig(), ShieldConfig.paper()):
-        config = dataclasses.replace(
-            config, reviser=dataclasses.replace(config.reviser, activate_after_episodes=1))
+    for config in presets():
         shield = _drive(Shield(config))
         Shield.from_snapshot(shield.snapshot())
     compiled = loaded = 0
@@ -57,6 +56,15 @@ def warm() -> WarmUp:
         compiled += sum(kernel.stats.cache_misses.values())
         loaded += sum(kernel.stats.cache_hits.values())
     return WarmUp(compiled, loaded, time.perf_counter() - start)
+
+
+def presets() -> tuple[ShieldConfig, ...]:
+    """The default, the paper's reviser and its literal reading, each reviser active after one
+    episode, so that a short loop reaches every path of the step."""
+    return tuple(
+        dataclasses.replace(config, reviser=dataclasses.replace(config.reviser,
+                                                                activate_after_episodes=1))
+        for config in (ShieldConfig(), ShieldConfig.paper(), ShieldConfig.paper_literal()))
 
 
 def _drive(shield: Shield) -> Shield:
@@ -69,8 +77,9 @@ def _drive(shield: Shield) -> Shield:
         z = rng.uniform(low, high)
         for _ in range(20):
             z = np.clip(z + rng.normal(0, 0.05, z.size) * (high - low), low, high)
-            shield.step(z, float(rng.uniform(shield.config.action.low,
-                                              shield.config.action.high)))
+            action = float(rng.uniform(shield.config.action.low, shield.config.action.high))
+            shield.step(z, action)
+            shield.step(z, action, learn=False)
         event = names[episode] if episode < len(names) else None
         shield.step(z, None, event=event, done=True)
     return shield
