@@ -109,26 +109,12 @@ class EvolvingClusterer:
 
     def learn_one(self, z: FloatArray) -> StateUpdate:
         """Cluster one normalised observation; may create or move one state."""
-        cfg = self.config
-        n = self._n
-        if n == self._centres.shape[0]:
-            self._reserve(n + 1)
-        self.k += 1
-        d2 = np.empty(n + 1)
-        kind, index, self.sigma, hit = _learn(
-            z, self.k, self.beta, self.sigma, self._centres, self._sq_norms, self._potentials,
-            self._radii, self._support, self._scatter, self._variances, n, self.max_states,
-            cfg.epsilon, cfg.rho, cfg.creation_rule == "ets_plus", _SPREADS[cfg.spread],
-            cfg.min_variance, d2)
-        self.capacity_hits += hit
-        if kind == NEW:
-            self._n = n + 1
-            return StateUpdate("new", index, d2)
-        return StateUpdate(_KINDS[kind], index, d2[:n])
+        return self.learn_and_recognise(z, 1)[0]
 
     def learn_and_recognise(self, z: FloatArray, k: int) -> tuple[StateUpdate, Belief]:
-        """:meth:`learn_one`, then the belief over the states after it (Eq. 1, top ``k``):
-        one compiled call, the step's first."""
+        """Cluster one normalised observation (it may create or move one state), then the
+        belief over the states after it (Eq. 1, top ``k``): one compiled call, the step's
+        first."""
         cfg = self.config
         n = self._n
         if n == self._centres.shape[0]:
