@@ -68,13 +68,7 @@ class RiskCandidates(Sequence[Candidate]):
 
     def _all(self) -> tuple[Candidate, ...]:
         if self._built is None:
-            names, rows, verdicts = self._names, self._by_bin.tolist(), self._verdicts.tolist()
-            low, width = self._action.low, self._action.step
-            self._built = tuple(
-                Candidate(low + (r + 0.5) * width, r,  # actions.decode(r)
-                          "ok" if verdicts[r] < 0 else names[verdicts[r]],
-                          dict(zip(names, rows[r], strict=True)))
-                for r in self._bins)
+            self._built = tuple(Candidate(**record) for record in self.records())
         return self._built
 
     def records(self) -> list[dict[str, Any]]:
@@ -82,7 +76,7 @@ class RiskCandidates(Sequence[Candidate]):
         straight from the arrays: the service's per-step path."""
         names, rows, verdicts = self._names, self._by_bin.tolist(), self._verdicts.tolist()
         low, width = self._action.low, self._action.step
-        return [{"action": low + (r + 0.5) * width, "bin": r,
+        return [{"action": low + (r + 0.5) * width, "bin": r,  # actions.decode(r)
                  "verdict": "ok" if verdicts[r] < 0 else names[verdicts[r]],
                  "risk": dict(zip(names, rows[r], strict=True))} for r in self._bins]
 
