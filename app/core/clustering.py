@@ -60,7 +60,7 @@ class EvolvingClusterer:
         self.sigma = 0.0  # sum of their squared norms
         self.capacity_hits = 0
         self._n = 0
-        self._centres = np.zeros((0, dim))
+        self._centres = np.zeros((dim, 0))  # dimension-major: the distances vectorise
         self._sq_norms = np.zeros(0)
         self._potentials = np.zeros(0)
         self._radii = np.zeros(0)
@@ -76,7 +76,7 @@ class EvolvingClusterer:
     @property
     def centres(self) -> FloatArray:
         """Cluster centres, one row per state, normalised units (read-only view)."""
-        view = self._centres[: self._n]
+        view = self._centres[:, : self._n].T
         view.flags.writeable = False
         return view
 
@@ -117,7 +117,7 @@ class EvolvingClusterer:
         first."""
         cfg = self.config
         n = self._n
-        if n == self._centres.shape[0]:
+        if n == self._centres.shape[1]:
             self._reserve(n + 1)
         self.k += 1
         d2 = np.empty(n + 1)
@@ -137,7 +137,7 @@ class EvolvingClusterer:
 
     def _reserve(self, needed: int) -> None:
         limit = self.max_states
-        self._centres = ensure_capacity(self._centres, needed, limit)
+        self._centres = ensure_capacity(self._centres, needed, limit, axis=1)
         self._sq_norms = ensure_capacity(self._sq_norms, needed, limit)
         self._potentials = ensure_capacity(self._potentials, needed, limit)
         self._radii = ensure_capacity(self._radii, needed, limit)
@@ -153,7 +153,7 @@ class EvolvingClusterer:
             "beta": self.beta.copy(),
             "sigma": self.sigma,
             "capacity_hits": self.capacity_hits,
-            "centres": self._centres[:n].copy(),
+            "centres": self._centres[:, :n].T.copy(),
             "sq_norms": self._sq_norms[:n].copy(),
             "potentials": self._potentials[:n].copy(),
             "radii": self._radii[:n].copy(),
@@ -177,7 +177,7 @@ class EvolvingClusterer:
             raise InvalidSnapshot(f"expected at most {max_states} centres of {dim} numbers",
                                   field="clustering.centres")
         self._n = n
-        self._centres = centres.reshape(n, dim)
+        self._centres = np.ascontiguousarray(centres.reshape(n, dim).T)
         self._sq_norms = stored.floats(data["sq_norms"], "clustering.sq_norms", (n,), low=0.0)
         self._potentials = stored.floats(data["potentials"], "clustering.potentials", (n,))
         self._radii = stored.floats(data["radii"], "clustering.radii", (n,), low=0.0)
@@ -208,12 +208,17 @@ def _dot(x: FloatArray, y: FloatArray) -> float:
 @njit(cache=True)
 def _sq_distances(centres: FloatArray, sq_norms: FloatArray, n: int, z: FloatArray,
                   theta: float, out: FloatArray) -> None:
-    dim = z.shape[0]
+    """``out[i] = max(||c_i||^2 - 2 c_i.z + theta, 0)`` for the first n centres (dimension
+    x state); each dot product summed over the dimensions in order, a dimension at a time
+    across all states so that the loops vectorise."""
     for i in range(n):
-        dot = 0.0
-        for j in range(dim):
-            dot += centres[i, j] * z[j]
-        d2 = sq_norms[i] - 2.0 * dot + theta
+        out[i] = 0.0
+    for j in range(z.shape[0]):
+        zj, row = z[j], centres[j]
+        for i in range(n):
+            out[i] += row[i] * zj
+    for i in range(n):
+        d2 = sq_norms[i] - 2.0 * out[i] + theta
         out[i] = d2 if d2 > 0.0 else 0.0
 
 
@@ -288,7 +293,7 @@ def _learn(z: FloatArray, k: int, beta: FloatArray, sigma: float, centres: Float
             candidate = p_new > p_max
             replace = p_new / p_max - delta / epsilon >= 1.0
         if candidate and replace:
-            centres[nearest] = z
+            centres[:, nearest] = z
             sq_norms[nearest] = theta
             potentials[nearest] = p_new
             _sq_distances(centres, sq_norms, n, z, theta, d2)
@@ -318,7 +323,7 @@ def _add(z: FloatArray, theta: float, potential: float, centres: FloatArray,
          sq_norms: FloatArray, potentials: FloatArray, radii: FloatArray,
          support: npt.NDArray[np.int64], scatter: FloatArray, variances: FloatArray, n: int,
          epsilon: float, spread: int, min_variance: float) -> None:
-    centres[n] = z
+    centres[:, n] = z
     sq_norms[n] = theta
     potentials[n] = potential
     radii[n] = epsilon  # initial spread = epsilon
