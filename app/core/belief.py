@@ -78,7 +78,7 @@ def recognise(sq_distances: FloatArray, variances: FloatArray, k: int) -> Belief
     return Belief(index[:m], prob[:m])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")  # variances are positive: no check, so it vectorises
 def _recognise(sq_distances: FloatArray, variances: FloatArray, k: int, index: IndexArray,
                prob: FloatArray) -> int:
     """Fill ``index`` (ascending) and ``prob`` with the belief; return its size."""

@@ -256,7 +256,7 @@ def _refresh_variance(variances: FloatArray, radii: FloatArray, support: npt.NDA
     variances[i] = max(var, min_variance)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")  # no divisor is 0; without the check the loops vectorise
 def _learn(z: FloatArray, k: int, beta: FloatArray, sigma: float, centres: FloatArray,
            sq_norms: FloatArray, potentials: FloatArray, radii: FloatArray,
            support: npt.NDArray[np.int64], scatter: FloatArray, variances: FloatArray,
