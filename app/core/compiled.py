@@ -36,10 +36,10 @@ class WarmUp:
 
 
 def kernels() -> Iterator[CPUDispatcher]:
-    """Every compiled kernel of the core."""
+    """Every compiled kernel of the core, once (where it is defined, not where imported)."""
     for module in MODULES:
         for value in vars(module).values():
-            if isinstance(value, CPUDispatcher):
+            if isinstance(value, CPUDispatcher) and value.py_func.__module__ == module.__name__:
                 yield value
 
 
