@@ -64,7 +64,8 @@ class Settings(BaseSettings):
 class ClusterSettings(Settings):
     """``python -m app serve-ray``: the service sharded on Ray Serve (:mod:`app.cluster`)."""
 
-    model_config = SettingsConfigDict(cli_prog_name="python -m app serve-ray")  # merged
+    # merged into the inherited configuration: only the program name differs
+    model_config = SettingsConfigDict(cli_prog_name="python -m app serve-ray")
 
     shards: int = Field(2, ge=1, le=1024, description="Shards; each owns the models whose "
                         "names it wins, and keeps its files under <data-dir>/shards/<i>.")
