@@ -24,6 +24,13 @@ settings.register_profile("project", max_examples=40, derandomize=True, deadline
 settings.load_profile("project")
 
 
+@pytest.fixture(autouse=True, scope="session")
+def sb3_logs_in_the_test_tmp(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """SB3 gives every model a logger folder under ``SB3_LOGDIR`` (the system's temp folder
+    when unset, where they would pile up); the examples' subprocesses inherit it."""
+    os.environ["SB3_LOGDIR"] = str(tmp_path_factory.mktemp("sb3"))
+
+
 @pytest.fixture
 def client() -> Iterator[TestClient]:
     """The app in memory, lifespan included."""
