@@ -277,18 +277,23 @@ class LimitsConfig:
     beyond ``max_streams`` makes the model forget the least recently used stream's previous
     step (counted as ``streams_expired``), so that stream names cannot exhaust memory.
     ``belief_top_k`` truncates beliefs and propagated predictions to their k most likely
-    states (exact when k >= the number of states).
+    states (exact when k >= the number of states). ``outcome_log`` bounds the transitions the
+    risk reviser keeps to count again as the states evolve (:mod:`app.core.outcome_log`;
+    about 64 bytes each with three observed dimensions); older ones stay counted where the
+    last recount put them, and 0 keeps none.
     """
 
     max_states: int = 10_000
     max_streams: int = 10_000
     belief_top_k: int = 16
     tpm_backend: Literal["lazy", "dense"] = "lazy"
+    outcome_log: int = 200_000
 
     def __post_init__(self) -> None:
         _check(1 <= self.max_states <= 1_000_000, "max_states", "lies in [1, 1000000]")
         _check(1 <= self.max_streams <= 1_000_000, "max_streams", "lies in [1, 1000000]")
         _check(self.belief_top_k >= 1, "belief_top_k", "must be >= 1")
+        _check(0 <= self.outcome_log <= 2_000_000, "outcome_log", "lies in [0, 2000000]")
 
 
 @dataclass(frozen=True)

@@ -134,7 +134,6 @@ class OutcomeCounts:
     def restore(cls, n_actions: int, n_criteria: int, max_states: int,
                 data: dict[str, Any]) -> OutcomeCounts:
         """Rebuild from :meth:`snapshot` output, checking every index and count."""
-        self = cls(n_actions, n_criteria, max_states)
         tries = stored.ints(data["tries"], "outcomes.tries")
         n = tries.shape[0] if tries.ndim == 2 else -1
         if tries.shape != (n, n_actions) or n > max_states:
@@ -149,15 +148,25 @@ class OutcomeCounts:
         if (moved.reshape(n, n_actions) + failures.sum(axis=2) != tries).any():
             raise InvalidSnapshot("outcome tries are not the sum of moves and failures",
                                   field="outcomes.tries")
-        self._tries, self._failures, self._n = tries, failures, n
-        self._rows, self._cols, self._moves, self._m = rows, cols, moves, rows.size
-        self._where = {int(r) * max_states + int(c): i
-                       for i, (r, c) in enumerate(zip(rows, cols, strict=True))}
+        self = cls.from_arrays(n_actions, n_criteria, max_states, tries, failures, rows, cols,
+                               moves, stored.integer(data["version"], "outcomes.version"))
         if len(self._where) != rows.size:
             raise InvalidSnapshot("outcome moves repeat a (state, action, next state)",
                                   field="outcomes.rows")
+        return self
+
+    @classmethod
+    def from_arrays(cls, n_actions: int, n_criteria: int, max_states: int, tries: IntArray,
+                    failures: IntArray, rows: IntArray, cols: IntArray, moves: IntArray,
+                    version: int) -> OutcomeCounts:
+        """Counts made elsewhere (a snapshot, a recount), taken as they are."""
+        self = cls(n_actions, n_criteria, max_states)
+        self._tries, self._failures, self._n = tries, failures, tries.shape[0]
+        self._rows, self._cols, self._moves, self._m = rows, cols, moves, rows.size
+        self._where = {int(r) * max_states + int(c): i
+                       for i, (r, c) in enumerate(zip(rows, cols, strict=True))}
         self._n_failures = int(failures.sum())
-        self.version = stored.integer(data["version"], "outcomes.version")
+        self.version = version
         return self
 
 

@@ -35,6 +35,7 @@ from app.core.flags import StateFlags
 from app.core.lazy_tpm import LazyTransitions
 from app.core.observation import ObservationSpace
 from app.core.observation import check as check_observation
+from app.core.outcome_log import OutcomeLog
 from app.core.tpm import DenseTransitions, TransitionModel
 
 FloatArray = npt.NDArray[np.float64]
@@ -171,6 +172,7 @@ class StreamState:
     proposed_bin: int = 0
     step: int = 0
     recognised: int = -1  # the belief's most likely state, -1 without a belief
+    z: FloatArray | None = None  # the normalised observation behind ``belief``
 
 
 @dataclass
@@ -216,11 +218,18 @@ class Shield:
                                 cfg.reviser.flag_min_rate)
         self.outcomes = risk.OutcomeCounts(cfg.action.n_bins, len(cfg.criteria),
                                            cfg.limits.max_states)
+        self.outcome_log = self._new_outcome_log()
         self._risk_table = np.zeros((0, cfg.action.n_bins, len(cfg.criteria)))
         self._risk_version = 0  # the outcome counts' version the table was built from
         self.streams: dict[str, StreamState] = {}
         self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria})
         self._rng = np.random.default_rng(cfg.reviser.seed)
+
+    def _new_outcome_log(self) -> OutcomeLog:
+        cfg = self.config
+        return OutcomeLog(self.space.size, cfg.action.n_bins, len(cfg.criteria),
+                          cfg.limits.max_states,
+                          cfg.limits.outcome_log if cfg.reviser.method == "risk" else 0)
 
     def _new_transitions(self) -> TransitionModel:
         cfg = self.config
@@ -357,7 +366,7 @@ class Shield:
         self._learn_transition(state, belief, update.is_new, step.applied_action)
         # flags on the recognised state
         recognised = belief.argmax()
-        self._learn_outcome(state, recognised, step)
+        self._learn_outcome(state, z, recognised, step)
         self.flags.observe(recognised, step.event, state.recognised != recognised)
         self.counters.steps += 1
         self.counters.model_version += 1
@@ -367,7 +376,7 @@ class Shield:
             self._refresh_risk()
             closing = self._closing(step, recognised, update.is_new, state.step)
             if cfg.transitions.across_episodes:  # A13 literal: the next reset is learned
-                state.belief, state.recognised, state.step = belief, recognised, 0
+                state.belief, state.recognised, state.step, state.z = belief, recognised, 0, z
             else:
                 del self.streams[step.stream]
             return closing
@@ -376,7 +385,7 @@ class Shield:
             self._refresh_risk()
         decision = self._decide(step, belief, recognised, update.is_new, state.step, self._rng)
         assert decision.action is not None and step.action is not None
-        state.belief, state.recognised = belief, recognised
+        state.belief, state.recognised, state.z = belief, recognised, z
         state.proposed_bin = actions.encode(step.action, cfg.action)
         state.applied_bin = (state.proposed_bin if decision.action == step.action
                              else actions.encode(decision.action, cfg.action))
@@ -402,22 +411,39 @@ class Shield:
         self.transitions.add_state()
         self.flags.add_state()
         self.outcomes.add_state()
+        self.outcome_log.add_state()
         n = self.n_states
         self._risk_table = ensure_capacity(self._risk_table, n, self.config.limits.max_states)
 
-    def _learn_outcome(self, state: StreamState, recognised: int, step: StepInput) -> None:
+    def _learn_outcome(self, state: StreamState, z: FloatArray, recognised: int,
+                       step: StepInput) -> None:
         """Count what the stream's previous action led to: the recognised state, or the
-        failure of this step's event (an absorbing outcome). Only the risk reviser reads them,
-        so the paper's counts nothing here."""
+        failure of this step's event (an absorbing outcome), and log it to count again later
+        (:mod:`app.core.outcome_log`). Only the risk reviser reads them, so the paper's
+        counts nothing here."""
         if state.belief is None or self.config.reviser.method != "risk":
             return
         action_bin = (state.applied_bin if step.applied_action is None
                       else actions.encode(step.applied_action, self.config.action))
-        previous = state.recognised
-        if step.event is None:
+        previous, event = state.recognised, step.event
+        log = self.outcome_log
+        if log.full:
+            self._recount()
+        if event is None:
             self.outcomes.learn_move(previous, action_bin, recognised)
+        else:
+            self.outcomes.learn_failure(previous, action_bin, event)
+        if log.capacity == 0:
             return
-        self.outcomes.learn_failure(previous, action_bin, step.event)
+        if state.z is None:  # a stream restored from a snapshot that did not keep it
+            log.count_elsewhere(previous, action_bin, recognised, event)
+        else:
+            log.append(state.z, action_bin, z if event is None else None, event)
+
+    def _recount(self) -> None:
+        """Count the logged transitions again under the states as they are now."""
+        self.outcomes = self.outcome_log.recount(self.clusterer.most_likely,
+                                                 self.outcomes.version)
 
     def _refresh_risk(self) -> None:
         """Rebuild the risk table from the outcome counts (:func:`risk.horizon_risk`)."""
@@ -425,6 +451,8 @@ class Shield:
         n = self.n_states
         if cfg.reviser.method != "risk" or n == 0:
             return
+        if self.outcome_log.due:
+            self._recount()
         self._risk_table[:n] = risk.horizon_risk(
             self.outcomes.tries, self.outcomes.failures, self.outcomes.moves(),
             self._directions, cfg.risk.horizon, cfg.risk.prior_safe)
@@ -651,6 +679,7 @@ class Shield:
             "transitions": self.transitions.snapshot(),
             "flags": self.flags.snapshot(),
             "outcomes": self.outcomes.snapshot(),
+            "outcome_log": self.outcome_log.snapshot(),
             "risk": {"table": self._risk_table[: self.n_states].copy(),
                      "version": self._risk_version},
             "streams": {
@@ -660,6 +689,7 @@ class Shield:
                     "applied_bin": s.applied_bin,
                     "proposed_bin": s.proposed_bin,
                     "step": s.step,
+                    "z": None if s.z is None else s.z.copy(),
                 }
                 for name, s in self.streams.items()
             },
@@ -740,7 +770,9 @@ class Shield:
                            stored.integer(data["proposed_bin"], f"{field}.proposed_bin",
                                           high=q - 1),
                            stored.integer(data["step"], f"{field}.step"),
-                           -1 if belief is None else belief.argmax())
+                           -1 if belief is None else belief.argmax(),
+                           None if belief is None or data.get("z") is None
+                           else stored.floats(data["z"], f"{field}.z", (self.space.size,)))
 
     def _restore_risk(self, data: dict[str, Any], n: int) -> None:
         """The outcome counts and the risk table; a format-2 snapshot (from before the risk
@@ -750,6 +782,7 @@ class Shield:
         if data["format"] == 2:
             for _ in range(n):
                 self.outcomes.add_state()
+                self.outcome_log.add_state()
             self._risk_table = np.zeros((n, q, n_c))
             return
         self.outcomes = risk.OutcomeCounts.restore(q, n_c, cfg.limits.max_states,
@@ -757,7 +790,28 @@ class Shield:
         if self.outcomes.n_states != n:
             raise InvalidSnapshot("outcomes and states disagree on the state count",
                                   field="outcomes.tries")
+        self._restore_outcome_log(data.get("outcome_log"), n)
         self._risk_table = stored.floats(data["risk"]["table"], "risk.table", (n, q, n_c),
                                          low=0.0, high=1.0)
         self._risk_version = stored.integer(data["risk"]["version"], "risk.version")
+
+    def _restore_outcome_log(self, data: dict[str, Any] | None, n: int) -> None:
+        """The log and its base, which together make up the counts; a snapshot from before
+        the log keeps every count so far in the base, where it stays."""
+        cfg = self.config
+        q, n_c, limit = cfg.action.n_bins, len(cfg.criteria), cfg.limits.max_states
+        log = self.outcome_log
+        if data is None:
+            log.base = risk.OutcomeCounts.restore(q, n_c, limit, self.outcomes.snapshot())
+            return
+        log = OutcomeLog.restore(log.dim, q, n_c, limit, log.capacity, data, "outcome_log")
+        if log.base.n_states != n:
+            raise InvalidSnapshot("the outcome log and the states disagree on the state count",
+                                  field="outcome_log.base")
+        if log.capacity and (log.base.tries.sum() + len(log) != self.outcomes.tries.sum()
+                             or log.base.failures.sum() + log.n_failures
+                             != self.outcomes.failures.sum()):
+            raise InvalidSnapshot("the outcome log and its base do not add up to the counts",
+                                  field="outcome_log")
+        self.outcome_log = log
 

@@ -114,8 +114,15 @@ def test_a_snapshot_that_would_break_the_model_is_refused(
 
 
 def npz_cases(npz: bytes) -> dict[str, bytes]:
+    """Damaged copies of an archive; the bit flip lands in the compressed data of its largest
+    member (a flip in a local header's extra field would be harmless)."""
+    with zipfile.ZipFile(io.BytesIO(npz)) as archive:
+        largest = max(archive.infolist(), key=lambda info: info.compress_size)
+    data_start = (largest.header_offset + 30 + len(largest.filename.encode())
+                  + int.from_bytes(npz[largest.header_offset + 28: largest.header_offset + 30],
+                                   "little"))
     flipped = bytearray(npz)
-    flipped[len(flipped) // 2] ^= 0xFF
+    flipped[data_start + largest.compress_size // 2] ^= 0xFF
     return {"empty": b"", "truncated": npz[: len(npz) // 2], "bit-flipped": bytes(flipped),
             "not a zip": b"PK\x03\x04" + b"\x00" * 64}
 
