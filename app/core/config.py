@@ -208,14 +208,14 @@ class ReviserConfig:
     ``method`` ``risk`` (the default) revises by the failure risk of each action over a
     horizon (:class:`RiskConfig`, :mod:`app.core.risk`); ``paper`` by the paper's flags on
     predicted states (Algs. 1-3, with every switch below; :meth:`ShieldConfig.paper`). Either
-    revises only after ``activate_after_episodes`` episodes (the paper's xi = 50), learning
-    from the controller's own actions until then: acting from the first episode, the risk
-    reviser learned mostly from its own early revisions and over-braked on two of three
-    held-out worlds (docs/risk-reviser.md). ``seed`` drives the paper reviser's noise.
+    revises only after ``activate_after_episodes`` episodes, learning from the controller's
+    own actions until then: the paper's xi = 50 (its presets keep it), 0 for the risk reviser,
+    which reads a risk only where failures were counted and whose counts follow the states
+    as they evolve (docs/risk-reviser.md). ``seed`` drives the paper reviser's noise.
     """
 
     method: Literal["paper", "risk"] = "risk"
-    activate_after_episodes: int = 50  # xi
+    activate_after_episodes: int = 0  # xi
     noise_k: float = 0.001  # K
     noise: Literal["variance", "std"] = "variance"  # A7: V = a_max / max(1, K * episode)
     horizon: int = 1  # k, prediction steps
