@@ -111,7 +111,7 @@ class OutcomeLog:
         each logged transition under the states ``most_likely`` finds for its observations
         now. A full log first moves its older half into the base."""
         if self.full:
-            half = self._m // 2
+            half = (self._m + 1) // 2
             self.base = self._merged(self.base, most_likely, slice(0, half))
             keep = slice(half, self._m)
             for name in ("_before", "_after", "_bins", "_outcomes"):

@@ -82,14 +82,17 @@ def test_a_failure_moves_with_the_states_when_they_are_split() -> None:
     assert after.failures[:, :, 0].tolist() == [[0, 0, 0], [0, 0, 1]]
     assert after.tries.tolist() == [[1, 1, 0], [0, 0, 1]]
     rows, cols, moves = after.moves()
-    assert list(zip(rows.tolist(), cols.tolist(), moves.tolist())) == [(0, 0, 1), (1, 1, 1)]
+    assert list(zip(rows.tolist(), cols.tolist(), moves.tolist(), strict=True)) == [
+        (0, 0, 1), (1, 1, 1)]
 
 
-def test_a_full_log_folds_its_older_half_into_the_base() -> None:
-    shield = Shield(ShieldConfig.from_dict({"limits": {"outcome_log": 500}}))
+@pytest.mark.parametrize("capacity", [1, 500])
+def test_a_full_log_folds_its_older_half_into_the_base(capacity: int) -> None:
+    shield = Shield(ShieldConfig.from_dict({"limits": {"outcome_log": capacity}}))
     drive(shield, 4000, seed=2)
     log = shield.outcome_log
-    assert 0 < len(log) <= 500
+    assert 0 < len(log) <= capacity
+    Shield.from_snapshot(shield.snapshot())
     assert log.base.tries.sum() + len(log) == shield.outcomes.tries.sum()
     assert log.base.failures.sum() + log.n_failures == shield.outcomes.failures.sum()
 
