@@ -85,10 +85,11 @@ class OutcomeLog:
         if self.capacity == 0:
             return
         at = self._m
-        self._before = ensure_capacity(self._before, at + 1, self.capacity)
-        self._after = ensure_capacity(self._after, at + 1, self.capacity)
-        self._bins = ensure_capacity(self._bins, at + 1, self.capacity)
-        self._outcomes = ensure_capacity(self._outcomes, at + 1, self.capacity)
+        if at == self._bins.shape[0]:  # grow every column, doubling up to the bound
+            self._before = ensure_capacity(self._before, at + 1, self.capacity)
+            self._after = ensure_capacity(self._after, at + 1, self.capacity)
+            self._bins = ensure_capacity(self._bins, at + 1, self.capacity)
+            self._outcomes = ensure_capacity(self._outcomes, at + 1, self.capacity)
         self._before[at] = before
         if after is not None:
             self._after[at] = after
