@@ -209,9 +209,10 @@ class ReviserConfig:
     horizon (:class:`RiskConfig`, :mod:`app.core.risk`); ``paper`` by the paper's flags on
     predicted states (Algs. 1-3, with every switch below; :meth:`ShieldConfig.paper`). Either
     revises only after ``activate_after_episodes`` episodes, learning from the controller's
-    own actions until then: the paper's xi = 50 (its presets keep it), 0 for the risk reviser,
-    which reads a risk only where failures were counted and whose counts follow the states
-    as they evolve (docs/risk-reviser.md). ``seed`` drives the paper reviser's noise.
+    own actions until then: from the first episode by default (the risk reviser reads a risk
+    only where failures were counted, and its counts follow the states as they evolve;
+    docs/risk-reviser.md), after the paper's xi = 50 in :meth:`ShieldConfig.paper` and
+    :meth:`ShieldConfig.paper_literal`. ``seed`` drives the paper reviser's noise.
     """
 
     method: Literal["paper", "risk"] = "risk"
