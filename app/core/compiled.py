@@ -82,4 +82,5 @@ def _drive(shield: Shield) -> Shield:
             shield.step(z, action, learn=False)
         event = names[episode] if episode < len(names) else None
         shield.step(z, None, event=event, done=True)
+    shield.clusterer.most_likely(np.zeros((1, shield.space.size)))  # what a recount runs
     return shield

@@ -98,15 +98,6 @@ class OutcomeLog:
         self._m = at + 1
         self._added += 1
 
-    def count_elsewhere(self, state: int, action_bin: int, next_state: int,
-                        criterion: int | None) -> None:
-        """A transition learned without its observations (a stream restored from a snapshot
-        that did not keep them): counted in the base, where it stays."""
-        if criterion is None:
-            self.base.learn_move(state, action_bin, next_state)
-        else:
-            self.base.learn_failure(state, action_bin, criterion)
-
     def recount(self, most_likely: MostLikely, version: int) -> OutcomeCounts:
         """The counts of every transition under the current states: the base plus the log,
         each logged transition under the states ``most_likely`` finds for its observations

@@ -116,6 +116,14 @@ class OutcomeCounts:
         self._moves[at] += 1
         self.version += 1
 
+    def learn(self, state: int, action_bin: int, next_state: int, criterion: int | None
+              ) -> None:
+        """Either outcome: a move to ``next_state``, or (``criterion`` given) a failure."""
+        if criterion is None:
+            self.learn_move(state, action_bin, next_state)
+        else:
+            self.learn_failure(state, action_bin, criterion)
+
     def learn_failure(self, state: int, action_bin: int, criterion: int) -> None:
         """Action ``action_bin`` applied in ``state`` ended in a failure of ``criterion``."""
         self._tries[state, action_bin] += 1

@@ -429,14 +429,11 @@ class Shield:
         log = self.outcome_log
         if log.full:
             self._recount()
-        if event is None:
-            self.outcomes.learn_move(previous, action_bin, recognised)
-        else:
-            self.outcomes.learn_failure(previous, action_bin, event)
+        self.outcomes.learn(previous, action_bin, recognised, event)
         if log.capacity == 0:
             return
-        if state.z is None:  # a stream restored from a snapshot that did not keep it
-            log.count_elsewhere(previous, action_bin, recognised, event)
+        if state.z is None:  # a stream restored from a snapshot that did not keep it:
+            log.base.learn(previous, action_bin, recognised, event)  # counted where it is
         else:
             log.append(state.z, action_bin, z if event is None else None, event)
 

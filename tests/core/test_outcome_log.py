@@ -7,7 +7,7 @@ import collections
 import numpy as np
 import pytest
 
-from app.core import InvalidSnapshot, Shield, ShieldConfig
+from app.core import InvalidConfig, InvalidSnapshot, Shield, ShieldConfig
 from app.core.belief import recognise
 from app.core.outcome_log import OutcomeLog
 from tests.core.test_risk import crash_world
@@ -156,3 +156,16 @@ def test_a_damaged_log_is_refused_naming_its_part(damage: str) -> None:
     with pytest.raises(InvalidSnapshot) as refused:
         Shield.from_snapshot(data)
     assert refused.value.field == field
+
+
+def test_a_bad_log_bound_names_its_field() -> None:
+    with pytest.raises(InvalidConfig) as refused:
+        ShieldConfig.from_dict({"limits": {"outcome_log": -1}})
+    assert refused.value.field == "limits.outcome_log"
+
+
+def test_the_default_revises_from_the_first_episodes_and_the_paper_waits_fifty() -> None:
+    default, paper = Shield(), Shield(ShieldConfig.paper())
+    assert crash_world(default, 3, seed=1) > 0 and crash_world(paper, 3, seed=1) > 0
+    assert default.step([28.0, 20.0, 10.0], 1.9).revised
+    assert paper.step([28.0, 20.0, 10.0], 1.9).reason == "inactive"
