@@ -6,6 +6,7 @@ import importlib
 
 import pytest
 
+from bench.worlds.__main__ import world_named
 from bench.worlds.harness import compare, run
 
 WORLDS = ["braking_lead", "pendulum", "wall"]
@@ -28,8 +29,29 @@ def test_compare_is_deterministic() -> None:
     assert first["alone"] == sum(first["runs"][0]["alone"]["failures"].values())
 
 
-@pytest.mark.parametrize("name", ["SLUGGISH_WORLD", "COLLAPSED_WORLD"])
+@pytest.mark.parametrize("name", ["tuning_sluggish", "tuning_collapsed_plain"])
 def test_the_slow_failure_tuning_worlds_fall_behind_without_the_shield(name: str) -> None:
-    world = getattr(importlib.import_module("bench.worlds.tuning"), name)
-    alone = run(world, seed=0, episodes=6, warmup=0, config=None)
+    alone = run(world_named(name), seed=0, episodes=6, warmup=0, config=None)
     assert set(alone["failures"]) == {"large_distance"} and alone["total"] >= 3
+
+
+def test_the_plain_tuning_worlds_differ_only_in_the_configuration() -> None:
+    default, plain = world_named("tuning_idm"), world_named("tuning_idm_plain")
+    assert plain.config.observation.high == (35.0, 200.0, 35.0)
+    assert plain.config.observation.knee == ()
+    assert plain.config.to_dict()["risk"] == default.config.to_dict()["risk"]
+
+
+def test_the_tank_fails_both_ways_alone_and_the_shield_learns_from_it() -> None:
+    world = world_named("tuning_tank")
+    alone = run(world, seed=0, episodes=30, warmup=0, config=None)
+    assert set(alone["failures"]) == {"overflow", "dry"}
+    shielded = run(world, seed=0, episodes=30, warmup=0, config=world.config)
+    assert shielded["total"] < alone["total"] and shielded["states"] >= 2
+
+
+def test_an_unknown_world_is_refused_with_the_names_there_are() -> None:
+    with pytest.raises(SystemExit, match="tuning_tank"):
+        world_named("tuning_nowhere")
+    with pytest.raises(SystemExit, match="braking_lead"):
+        world_named("nowhere")

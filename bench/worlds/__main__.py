@@ -1,10 +1,12 @@
 """``python -m bench.worlds``: failures per 100 episodes after the warm-up, with and without
-the shield, on the held-out worlds (none of them was used to choose a default).
+the shield, on the held-out worlds (none of them was used to choose a default) or, by name or
+all at once as ``tuning``, on the tuning worlds (:mod:`bench.worlds.tuning`).
 
 Example::
 
     python -m bench.worlds --seeds 1000,1001,1002 --episodes 150 --out results/worlds/risk.json
     python -m bench.worlds --overrides '{"reviser": {"method": "paper"}}'
+    python -m bench.worlds --worlds tuning --seeds 0,1
 """
 
 from __future__ import annotations
@@ -17,11 +19,24 @@ import platform
 from pathlib import Path
 
 from app.core import ShieldConfig
-from bench.worlds.harness import compare, summary_line
+from bench.worlds.harness import World, compare, summary_line
 
 WORLDS = ("braking_lead", "pendulum", "wall")
-TUNING = {"tuning_idm": "IDM_WORLD", "tuning_sluggish": "SLUGGISH_WORLD",
-          "tuning_collapsed": "COLLAPSED_WORLD", "tuning_random": "RANDOM_WORLD"}
+
+
+def world_named(name: str) -> World:
+    """A held-out world by module name, or a tuning world by its name in
+    :data:`bench.worlds.tuning.WORLDS`."""
+    if name.startswith("tuning_"):
+        from bench.worlds.tuning import WORLDS as TUNING  # the simulator's lead data, on demand
+
+        if name not in TUNING:
+            raise SystemExit(f"no tuning world {name!r}; there are {', '.join(TUNING)}")
+        return TUNING[name]
+    if name not in WORLDS:
+        raise SystemExit(f"no held-out world {name!r}; there are {', '.join(WORLDS)}")
+    world: World = importlib.import_module(f"bench.worlds.{name}").WORLD
+    return world
 
 
 def merged(base: ShieldConfig, overrides: dict[str, dict[str, object]]) -> ShieldConfig:
@@ -44,11 +59,13 @@ def main() -> None:
     seeds = [int(s) for s in args.seeds.split(",")]
     overrides = json.loads(args.overrides)
     results = []
-    for name in args.worlds.split(","):
-        if name in TUNING:
-            world = getattr(importlib.import_module("bench.worlds.tuning"), TUNING[name])
-        else:
-            world = importlib.import_module(f"bench.worlds.{name}").WORLD
+    names = args.worlds.split(",")
+    if names == ["tuning"]:
+        from bench.worlds.tuning import WORLDS as TUNING
+
+        names = list(TUNING)
+    for name in names:
+        world = world_named(name)
         config = merged(world.config, overrides)
         result = compare(dataclasses.replace(world, config=config), seeds, args.episodes,
                          args.warmup)
