@@ -213,9 +213,11 @@ def _dot(x: FloatArray, y: FloatArray) -> float:
     return total
 
 
-@njit(cache=True, error_model="numpy")  # variances are positive
+@njit(cache=True, nogil=True, error_model="numpy")  # variances are positive
 def _most_likely(points: FloatArray, centres: FloatArray, sq_norms: FloatArray,
                  variances: FloatArray, n: int, out: npt.NDArray[np.int64]) -> None:
+    """:meth:`EvolvingClusterer.most_likely` into ``out``. Without the GIL: recounting a
+    large model's log takes seconds, and the threads of other models go on meanwhile."""
     d2 = np.empty(n)
     for row in range(points.shape[0]):
         z = points[row]

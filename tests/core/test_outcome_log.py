@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import collections
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -58,6 +60,50 @@ def test_a_recount_counts_every_transition_under_the_states_recognised_now() -> 
     q_moves = {(int(r), int(c)): int(m) for r, c, m in zip(rows, cols, counts, strict=True)}
     assert q_moves == moves
     assert recounted.tries.sum() == shield.outcomes.tries.sum()  # nothing lost or added
+
+
+def test_a_recount_of_interleaved_streams_counts_every_transition_alike() -> None:
+    # two streams alternate, so a transition's next row is mostly the other stream's: the
+    # observations after are recognised afresh rather than taken from the next row
+    shield = Shield()
+    for t, ((z, a, done), (w, b, ended)) in enumerate(zip(random_stream(1, 3000),
+                                                          random_stream(2, 3000),
+                                                          strict=True)):
+        shield.step(z, None if done else a, stream="one", done=done,
+                    event="collision" if done and t % 2 == 0 else None)
+        shield.step(w, None if ended else b, stream="two", done=ended)
+    recounted = shield.outcome_log.recount(shield.clusterer.most_likely, shield.outcomes.version)
+    tries, failures, moves = by_hand(shield)
+    assert np.array_equal(recounted.tries, tries)
+    assert np.array_equal(recounted.failures, failures)
+    rows, cols, counts = recounted.moves()
+    assert {(int(r), int(c)): int(m) for r, c, m in zip(rows, cols, counts, strict=True)} == moves
+
+
+def test_recognising_a_large_log_lets_other_threads_run() -> None:
+    # a recount of a large model takes seconds; the threads of other models must go on
+    clusterer = Shield(ShieldConfig()).clusterer
+    rng = np.random.default_rng(0)
+    for z in rng.uniform(0, 1, (3000, 3)):
+        clusterer.learn_one(z)
+    points = rng.uniform(0, 1, (1_000_000, 3))
+    clusterer.most_likely(points[:10])  # compiled
+    started, done = threading.Event(), threading.Event()
+
+    def recognise_all() -> None:
+        started.set()
+        clusterer.most_likely(points)
+        done.set()
+
+    worker = threading.Thread(target=recognise_all)
+    worker.start()
+    started.wait()
+    time.sleep(0.01)  # the worker is in the kernel: with the GIL held, nothing runs here
+    progress = 0
+    while not done.is_set():
+        progress += 1
+    worker.join()
+    assert progress > 10_000, progress
 
 
 def test_a_failure_moves_with_the_states_when_they_are_split() -> None:
