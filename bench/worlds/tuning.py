@@ -1,7 +1,7 @@
 """The tuning worlds: the project's own car-following simulator (``client/sim``) with its
 non-learning controllers: the aggressive IDM (it collides), the sluggish one (it falls behind),
-the random one, and a collapsed one that always brakes fully, as a DDPG actor stuck at its
-bound does (the shield has to drive). Each comes twice: with the project's car-following
+the ordinary one reacting 2 s late (both), the random one, and a collapsed one that always
+brakes fully, as a DDPG actor stuck at its bound does (the shield has to drive). Each comes twice: with the project's car-following
 configuration, and (``_plain``) with the one a new user would write, the simulator's ranges
 scaled linearly (headway over 200 m, no knee), which gives the model few, broad states as the
 held-out worlds' configurations do. Beside them the tank (:mod:`bench.worlds.tank`), a world
@@ -13,7 +13,10 @@ the held-out worlds beside this module.
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
+
+import numpy as np
 
 from app.core import ObservationSpec, ShieldConfig
 from bench.worlds import tank
@@ -23,6 +26,23 @@ from client.sim import lead as lead_data
 from client.sim.car_following import MAX_STEPS, CarFollowingEnv
 
 _LEAD = lead_data.cmap("train")
+
+
+LATE_STEPS = 8  # 2 s at the simulator's 0.25 s step
+
+
+class LateIDM:
+    """The ordinary IDM preset acting on what it saw ``LATE_STEPS`` steps ago."""
+
+    def __init__(self, seed: int) -> None:
+        self.seen: deque[np.ndarray] = deque(maxlen=LATE_STEPS + 1)
+
+    def reset(self) -> None:
+        self.seen.clear()
+
+    def __call__(self, observation: np.ndarray) -> float:
+        self.seen.append(np.array(observation, dtype=np.float64))
+        return PRESETS["normal"].act(self.seen[0])
 
 
 PLAIN = ShieldConfig(observation=ObservationSpec(high=(35.0, 200.0, 35.0), knee=()))
@@ -39,6 +59,7 @@ def _world(name: str, controller: Any, config: ShieldConfig | None = None) -> Wo
 _CONTROLLERS: dict[str, tuple[str, Any]] = {
     "idm": ("idm-aggressive", lambda seed: PRESETS["aggressive"].act),
     "sluggish": ("idm-sluggish", lambda seed: PRESETS["sluggish"].act),
+    "late": ("idm-late", LateIDM),
     "collapsed": ("collapsed", lambda seed: (lambda observation: -2.0)),
     "random": ("random", lambda seed: RandomController(seed).act),
 }
