@@ -247,13 +247,17 @@ class RiskConfig:
     """The failure-aware reviser (:mod:`app.core.risk`).
 
     An action is kept when its risk (the probability, summed over criteria, of a failure
-    within ``horizon`` steps under the safest known continuation) is at most ``threshold`` or
-    within ``margin`` of the safest action's; otherwise the nearest allowed action replaces
-    it. The defaults act on any measurable difference (docs/risk-reviser.md).
-    ``prior_safe`` is the number of safe pseudo-tries every (state, action) starts with. The
-    risk table is rebuilt at every episode end and after ``refresh_steps`` steps.
+    within ``horizon`` steps) is at most ``threshold`` or within ``margin`` of the safest
+    action's; otherwise the nearest allowed action replaces it. The defaults act on any
+    measurable difference (docs/risk-reviser.md). ``model`` says how the risk is estimated:
+    ``counts``, per (state, action) outcome counts and value iteration under the safest known
+    continuation (:mod:`app.core.risk`); ``local``, a linear model per state in the observation
+    and the action of what followed each step (:mod:`app.core.local_risk`). For ``counts``,
+    ``prior_safe`` is the number of safe pseudo-tries every (state, action) starts with, and
+    the risk table is rebuilt at every episode end and after ``refresh_steps`` steps.
     """
 
+    model: Literal["local", "counts"] = "counts"
     horizon: int = 8
     threshold: float = 0.0
     margin: float = 0.001
@@ -261,6 +265,7 @@ class RiskConfig:
     refresh_steps: int = 500
 
     def __post_init__(self) -> None:
+        _check(self.model in ("local", "counts"), "model", "model is 'local' or 'counts'")
         _check(1 <= self.horizon <= 256, "horizon", "horizon lies in [1, 256]")
         _check(0.0 <= self.threshold <= 1.0, "threshold", "threshold lies in [0, 1]")
         _check(0.0 <= self.margin <= 1.0, "margin", "margin lies in [0, 1]")

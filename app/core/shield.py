@@ -33,6 +33,7 @@ from app.core.errors import (
 )
 from app.core.flags import StateFlags
 from app.core.lazy_tpm import LazyTransitions
+from app.core.local_risk import LocalRisk
 from app.core.observation import ObservationSpace
 from app.core.observation import check as check_observation
 from app.core.outcome_log import OutcomeLog
@@ -43,6 +44,7 @@ SNAPSHOT_FORMAT = 3
 # Observations beyond this magnitude are refused: their squares (distances, potentials) would
 # overflow float64 long before they could mean anything physical.
 MAX_MAGNITUDE = 1e12
+ONE_STATE, ONE = np.zeros(1, dtype=np.int64), np.ones(1)  # a belief of one row
 
 
 @dataclass(slots=True)
@@ -219,6 +221,7 @@ class Shield:
         self.outcomes = risk.OutcomeCounts(cfg.action.n_bins, len(cfg.criteria),
                                            cfg.limits.max_states)
         self.outcome_log = self._new_outcome_log()
+        self.local_risk = self._new_local_risk()
         self._risk_table = np.zeros((0, cfg.action.n_bins, len(cfg.criteria)))
         self._risk_version = 0  # the outcome counts' version the table was built from
         self.streams: dict[str, StreamState] = {}
@@ -230,6 +233,13 @@ class Shield:
         return OutcomeLog(self.space.size, cfg.action.n_bins, len(cfg.criteria),
                           cfg.limits.max_states,
                           cfg.limits.outcome_log if cfg.reviser.method == "risk" else 0)
+
+    def _new_local_risk(self) -> LocalRisk | None:
+        cfg = self.config
+        if cfg.reviser.method != "risk" or cfg.risk.model != "local":
+            return None
+        return LocalRisk(self.space.size, len(cfg.criteria), cfg.action.n_bins,
+                         cfg.risk.horizon, cfg.limits.max_states)
 
     def _new_transitions(self) -> TransitionModel:
         cfg = self.config
@@ -383,7 +393,8 @@ class Shield:
 
         if self.outcomes.version - self._risk_version >= cfg.risk.refresh_steps:
             self._refresh_risk()
-        decision = self._decide(step, belief, recognised, update.is_new, state.step, self._rng)
+        decision = self._decide(step, z, belief, recognised, update.is_new, state.step,
+                                self._rng)
         assert decision.action is not None and step.action is not None
         state.belief, state.recognised, state.z = belief, recognised, z
         state.proposed_bin = actions.encode(step.action, cfg.action)
@@ -401,7 +412,10 @@ class Shield:
         if state is None:
             state = StreamState()
             if len(self.streams) >= self.config.limits.max_streams:
-                del self.streams[next(iter(self.streams))]
+                expired = next(iter(self.streams))
+                del self.streams[expired]
+                if self.local_risk is not None:
+                    self.local_risk.forget(expired)
                 self.counters.streams_expired += 1
         self.streams[name] = state
         return state
@@ -412,6 +426,8 @@ class Shield:
         self.flags.add_state()
         self.outcomes.add_state()
         self.outcome_log.add_state()
+        if self.local_risk is not None:
+            self.local_risk.add_state()
         n = self.n_states
         self._risk_table = ensure_capacity(self._risk_table, n, self.config.limits.max_states)
 
@@ -426,6 +442,11 @@ class Shield:
         action_bin = (state.applied_bin if step.applied_action is None
                       else actions.encode(step.applied_action, self.config.action))
         previous, event = state.recognised, step.event
+        if self.local_risk is not None:
+            if state.z is not None:  # (a stream restored from an old snapshot lacks it)
+                self.local_risk.learn(step.stream, state.belief, state.z, action_bin, event,
+                                      step.done)
+            return
         log = self.outcome_log
         if log.full:
             self._recount()
@@ -446,7 +467,7 @@ class Shield:
         """Rebuild the risk table from the outcome counts (:func:`risk.horizon_risk`)."""
         cfg = self.config
         n = self.n_states
-        if cfg.reviser.method != "risk" or n == 0:
+        if cfg.reviser.method != "risk" or n == 0 or self.local_risk is not None:
             return
         if self.outcome_log.due:
             self._recount()
@@ -489,7 +510,7 @@ class Shield:
         if step.done:
             return self._closing(step, belief.argmax(), False, state.step)
         rng = copy.deepcopy(self._rng)
-        return self._decide(step, belief, belief.argmax(), False, state.step, rng)
+        return self._decide(step, z, belief, belief.argmax(), False, state.step, rng)
 
     def _closing(self, step: StepInput, recognised: int | None, is_new: bool,
                  index: int) -> Decision:
@@ -511,6 +532,7 @@ class Shield:
     def _decide_by_flags(
         self,
         step: StepInput,
+        z: FloatArray,
         belief: Belief,
         recognised: int,
         is_new: bool,
@@ -570,8 +592,9 @@ class Shield:
             candidates=candidates, suggested=revised, **record, **common,  # type: ignore[arg-type]
         )
 
-    def _decide_by_risk(self, step: StepInput, belief: Belief, recognised: int,
-                        is_new: bool, index: int, rng: np.random.Generator) -> Decision:
+    def _decide_by_risk(self, step: StepInput, z: FloatArray, belief: Belief,
+                        recognised: int, is_new: bool, index: int, rng: np.random.Generator
+                        ) -> Decision:
         """The risk reviser (:mod:`app.core.risk`): keep the proposal unless its risk is over
         the threshold and beyond the margin of the safest action; then the nearest allowed
         (at its midpoint: no noise, so ``rng`` is not drawn from)."""
@@ -582,15 +605,21 @@ class Shield:
         action = suggested = proposed
         candidates: Sequence[Candidate] = ()
         revised = False
-        if not self.outcomes.any_failure:
+        local = self.local_risk
+        if not (self.outcomes.any_failure if local is None else local.failures):
             risks, limit, verdict, reason = self._risk(None), None, "ok", "cold_start"
         else:
             start = actions.encode(proposed, cfg.action)
             by_bin = np.empty((cfg.action.n_bins, len(names)))
             verdicts = np.empty(cfg.action.n_bins, dtype=np.int64)
+            table, index_, prob = self._risk_table, belief.index, belief.prob
+            if local is not None:  # this observation's own row, under the monotone prior
+                local.read(belief, z, by_bin)
+                table, index_, prob = np.empty((1,) + by_bin.shape), ONE_STATE, ONE
+                risk.monotone(by_bin[None], self._safe_steps, table)
             limit, worst, final, kept = risk.decide(
-                self._risk_table, belief.index, belief.prob, start, cfg.risk.threshold,
-                cfg.risk.margin, self._safe_steps, by_bin, verdicts)
+                table, index_, prob, start, cfg.risk.threshold, cfg.risk.margin,
+                self._safe_steps, by_bin, verdicts)
             risks = dict(zip(names, by_bin[start].tolist(), strict=True))
             verdict = "ok" if kept else names[worst]
             if self.counters.episodes < cfg.reviser.activate_after_episodes:
@@ -679,6 +708,7 @@ class Shield:
             "outcome_log": self.outcome_log.snapshot(),
             "risk": {"table": self._risk_table[: self.n_states].copy(),
                      "version": self._risk_version},
+            "local_risk": None if self.local_risk is None else self.local_risk.snapshot(),
             "streams": {
                 name: {
                     "index": None if s.belief is None else s.belief.index.copy(),
@@ -746,6 +776,9 @@ class Shield:
                                   field="streams")
         self.streams = {str(name): self._restore_stream(f"streams.{name}", s, n)
                         for name, s in streams.items()}
+        if self.local_risk is not None and set(self.local_risk.pending) - set(self.streams):
+            raise InvalidSnapshot("pending risk steps name a stream the model lacks",
+                                  field="local_risk.streams")
         return self
 
     def _restore_stream(self, field: str, data: dict[str, Any], n: int) -> StreamState:
@@ -791,6 +824,13 @@ class Shield:
         self._risk_table = stored.floats(data["risk"]["table"], "risk.table", (n, q, n_c),
                                          low=0.0, high=1.0)
         self._risk_version = stored.integer(data["risk"]["version"], "risk.version")
+        local = data.get("local_risk")
+        if self.local_risk is not None and local is not None:
+            self.local_risk = LocalRisk.restore(
+                self.space.size, n_c, q, cfg.risk.horizon, cfg.limits.max_states, n, local)
+        elif self.local_risk is not None:  # a snapshot from before the local model
+            for _ in range(n):
+                self.local_risk.add_state()
 
     def _restore_outcome_log(self, data: dict[str, Any] | None, n: int) -> None:
         """The log and its base, which together make up the counts; a snapshot from before

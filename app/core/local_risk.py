@@ -1,0 +1,215 @@
+"""Risk per action, local in the observation: the risk reviser's model (``risk.model: local``).
+
+For each state i and criterion c a linear model ``theta_ic . phi(z, u)`` of the probability that
+a failure of c follows within ``horizon`` steps, where ``phi = [1, z, u]``: the observation in
+the clustering space and the action, its bin's midpoint scaled to [0, 1]. Together the states'
+models make a Takagi-Sugeno model, each weighted by the state's membership (Eq. 1's belief):
+
+    risk_c(z, a) = clip(sum_i b_i(z) theta_ic . phi(z, u_a), 0, 1)
+
+so the risk changes *within* a state with where the observation lies in it and with the action,
+and a few broad states are enough: a crash counted under full braking at one edge of a state no
+longer makes every action there as risky (the confound of counting per state and action), and a
+car standing far back does not inherit the risk of close following.
+
+**Learning.** Each applied step ``(z, a)`` waits in its stream's queue until its label is
+known: 1 for criterion c when a failure of c follows within ``horizon`` steps, 0 once the step
+is ``horizon`` steps old or its episode has ended without a failure. Each state's weights are
+then fitted by weighted recursive least squares (the weight the step's belief gave the state),
+which is exact least squares on the labelled steps, with a weak ridge prior ``1 / prior_cov``.
+The label is the outcome under the behaviour that followed (controller and shield); a
+revised step is learned for the action applied, never for the proposal.
+
+**Monotone prior.** Each criterion's direction gives the safe side (braking never raises the
+risk of a collision), so the risks over the action bins are lifted to their running maximum
+from the safe end (:func:`app.core.risk.monotone`), as for the counted model.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+
+from app.core import _stored as stored
+from app.core._arrays import ensure_capacity
+from app.core.belief import Belief
+from app.core.errors import InvalidSnapshot
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+PRIOR_COV = 100.0  # initial covariance of every weight: a ridge of 1 / 100
+MIN_WEIGHT = 1e-3  # belief weights below this do not update a state
+
+
+Step = tuple[IntArray, FloatArray, FloatArray]  # belief states, their weights, phi(z, u)
+
+
+class LocalRisk:
+    """The per-state linear risk models and the streams' unlabelled steps."""
+
+    def __init__(self, dim: int, n_criteria: int, n_bins: int, horizon: int,
+                 max_states: int) -> None:
+        self.dim, self.n_criteria, self.n_bins = dim, n_criteria, n_bins
+        self.horizon, self.max_states = horizon, max_states
+        self.size = dim + 2  # [1, z, u]
+        self._n = 0
+        self._theta = np.zeros((0, n_criteria, self.size))
+        self._cov = np.zeros((0, self.size, self.size))
+        self.midpoints = (np.arange(n_bins) + 0.5) / n_bins
+        self.pending: dict[str, list[Step]] = {}  # per stream, the steps awaiting labels
+        self.failures = 0  # failures learned: none yet means nothing to revise against
+
+    @property
+    def n_states(self) -> int:
+        """Number of states modelled."""
+        return self._n
+
+    @property
+    def theta(self) -> FloatArray:
+        """The weights, states x criteria x [1, z, u] (read-only view)."""
+        view = self._theta[: self._n]
+        view.flags.writeable = False
+        return view
+
+    def add_state(self) -> None:
+        """A new state: no risk until it learns otherwise, weights free to move."""
+        n = self._n
+        self._theta = ensure_capacity(self._theta, n + 1, self.max_states)
+        self._cov = ensure_capacity(self._cov, n + 1, self.max_states)
+        self._theta[n] = 0.0
+        self._cov[n] = np.eye(self.size) * PRIOR_COV
+        self._n = n + 1
+
+    def features(self, z: FloatArray, action_bin: int) -> FloatArray:
+        """``phi(z, u) = [1, z, u]``."""
+        out = np.empty(self.size)
+        out[0] = 1.0
+        out[1:-1] = z
+        out[-1] = self.midpoints[action_bin]
+        return out
+
+    def learn(self, stream: str, belief: Belief, z: FloatArray, action_bin: int,
+              failure: int | None, ended: bool) -> None:
+        """The stream's previous step (``belief`` and ``z`` before it, ``action_bin`` applied)
+        ended in ``failure`` (a criterion index) or not; ``ended`` closes its episode."""
+        queue = self.pending.setdefault(stream, [])
+        queue.append((belief.index.copy(), belief.prob.copy(), self.features(z, action_bin)))
+        labels = np.zeros(self.n_criteria)
+        if failure is not None:
+            labels[failure] = 1.0
+            self.failures += 1
+        if failure is not None or ended:
+            for step in queue:
+                _fit(self._theta, self._cov, *step, labels)
+            del self.pending[stream]
+        elif len(queue) > self.horizon:  # old enough: no failure followed within the horizon
+            _fit(self._theta, self._cov, *queue.pop(0), labels)
+
+    def forget(self, stream: str) -> None:
+        """Drop a stream's unlabelled steps (a stream that expired)."""
+        self.pending.pop(stream, None)
+
+    def read(self, belief: Belief, z: FloatArray, out: FloatArray) -> None:
+        """``out`` (bins x criteria): each action's risk at ``z`` under ``belief``, before
+        the monotone prior."""
+        _read(self._theta, belief.index, belief.prob, z, self.midpoints, out)
+
+    def snapshot(self) -> dict[str, Any]:
+        """Exact state as arrays: the weights, their covariances and the pending steps."""
+        names, lengths, index, prob, phi = [], [], [], [], []
+        for name, queue in self.pending.items():
+            names.append(name)
+            lengths.append(len(queue))
+            for i, p, f in queue:
+                index.append(i)
+                prob.append(p)
+                phi.append(f)
+        sizes = [i.size for i in index]
+        return {"theta": self.theta.copy(), "cov": self._cov[: self._n].copy(),
+                "failures": self.failures, "streams": names,
+                "lengths": np.array(lengths, dtype=np.int64),
+                "sizes": np.array(sizes, dtype=np.int64),
+                "index": np.concatenate(index) if index else np.zeros(0, dtype=np.int64),
+                "prob": np.concatenate(prob) if prob else np.zeros(0),
+                "phi": np.array(phi).reshape(-1, self.size)}
+
+    @classmethod
+    def restore(cls, dim: int, n_criteria: int, n_bins: int, horizon: int, max_states: int,
+                n_states: int, data: dict[str, Any]) -> LocalRisk:
+        """Rebuild from :meth:`snapshot` output, checking every part against the model."""
+        self = cls(dim, n_criteria, n_bins, horizon, max_states)
+        m = self.size
+        theta = stored.floats(data["theta"], "local_risk.theta", (n_states, n_criteria, m))
+        cov = stored.floats(data["cov"], "local_risk.cov", (n_states, m, m))
+        self._theta, self._cov, self._n = theta.copy(), cov.copy(), n_states
+        self.failures = stored.integer(data["failures"], "local_risk.failures")
+        names = data["streams"]
+        if not isinstance(names, list) or not all(isinstance(s, str) for s in names):
+            raise InvalidSnapshot("pending streams must be names", field="local_risk.streams")
+        lengths = stored.ints(data["lengths"], "local_risk.lengths", (len(names),), low=1,
+                              high=horizon + 1)
+        steps = int(lengths.sum())
+        sizes = stored.ints(data["sizes"], "local_risk.sizes", (steps,), low=1)
+        index = stored.ints(data["index"], "local_risk.index", (int(sizes.sum()),), low=0,
+                            high=max(n_states - 1, 0))
+        prob = stored.floats(data["prob"], "local_risk.prob", index.shape, low=0.0, high=1.0)
+        phi = stored.floats(data["phi"], "local_risk.phi", (steps, m))
+        at = row = 0
+        for name, length in zip(names, lengths.tolist(), strict=True):
+            queue = self.pending.setdefault(name, [])
+            for _ in range(length):
+                size = int(sizes[row])
+                queue.append((index[at:at + size].copy(), prob[at:at + size].copy(),
+                              phi[row].copy()))
+                at, row = at + size, row + 1
+        return self
+
+
+@njit(cache=True)
+def _fit(theta: FloatArray, cov: FloatArray, index: IntArray, prob: FloatArray,
+         phi: FloatArray, labels: FloatArray) -> None:
+    """One labelled step into each belief state's weights: weighted recursive least squares
+    with weight ``prob`` (the state's membership), every criterion sharing the covariance."""
+    m = phi.shape[0]
+    gain = np.empty(m)
+    for t in range(index.shape[0]):
+        i, weight = index[t], prob[t]
+        if weight < MIN_WEIGHT:
+            continue
+        denominator = 1.0 / weight
+        for r in range(m):
+            total = 0.0
+            for s in range(m):
+                total += cov[i, r, s] * phi[s]
+            gain[r] = total
+            denominator += phi[r] * total
+        for c in range(labels.shape[0]):
+            error = labels[c]
+            for r in range(m):
+                error -= theta[i, c, r] * phi[r]
+            for r in range(m):
+                theta[i, c, r] += gain[r] * error / denominator
+        for r in range(m):
+            for s in range(m):
+                cov[i, r, s] -= gain[r] * gain[s] / denominator
+
+
+@njit(cache=True)
+def _read(theta: FloatArray, index: IntArray, prob: FloatArray, z: FloatArray,
+          midpoints: FloatArray, out: FloatArray) -> None:
+    """Each action's risk per criterion under the belief, clipped to [0, 1]."""
+    d = z.shape[0]
+    for a in range(midpoints.shape[0]):
+        for c in range(theta.shape[1]):
+            total = 0.0
+            for t in range(index.shape[0]):
+                i = index[t]
+                value = theta[i, c, 0] + theta[i, c, d + 1] * midpoints[a]
+                for r in range(d):
+                    value += theta[i, c, r + 1] * z[r]
+                total += prob[t] * value
+            out[a, c] = min(max(total, 0.0), 1.0)

@@ -1,0 +1,133 @@
+"""The local risk model (``risk.model: local``): least squares on delayed labels, risk that
+follows the observation within a state, snapshots, bad configurations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.core import InvalidConfig, InvalidSnapshot, Shield, ShieldConfig
+from app.core.belief import Belief
+from app.core.local_risk import PRIOR_COV, LocalRisk
+from tests.core.test_risk import crash_world
+from tests.utils import assert_same
+
+LOCAL = {"risk": {"model": "local", "horizon": 4}}
+
+
+def one_state(weight: float = 1.0) -> Belief:
+    return Belief(np.array([0]), np.array([weight]))
+
+
+def test_the_fit_is_weighted_ridge_least_squares_on_the_labelled_steps() -> None:
+    rng = np.random.default_rng(0)
+    model = LocalRisk(dim=2, n_criteria=2, n_bins=5, horizon=1, max_states=4)
+    model.add_state()
+    rows, labels, weights = [], [], []
+    for t in range(200):
+        z, action_bin, weight = rng.uniform(0, 1, 2), int(rng.integers(5)), rng.uniform(0.1, 1)
+        failure = int(rng.integers(2)) if rng.random() < 0.2 else None
+        # each step ends its own episode, so it is labelled at once
+        model.learn(f"s{t}", one_state(weight), z, action_bin, failure, ended=True)
+        rows.append(model.features(z, action_bin))
+        labels.append([failure == c for c in range(2)])
+        weights.append(weight)
+    x, y, w = np.array(rows), np.array(labels, dtype=float), np.array(weights)
+    ridge = x.T @ (w[:, None] * x) + np.eye(4) / PRIOR_COV
+    expected = np.linalg.solve(ridge, x.T @ (w[:, None] * y)).T
+    assert np.allclose(model.theta[0], expected, atol=1e-9)
+
+
+def test_a_step_is_labelled_safe_after_the_horizon_and_failed_when_a_failure_follows() -> None:
+    model = LocalRisk(dim=1, n_criteria=2, n_bins=3, horizon=3, max_states=2)
+    model.add_state()
+    z = np.array([0.5])
+    for _ in range(5):  # five safe steps: the first two are older than the horizon
+        model.learn("a", one_state(), z, 1, None, ended=False)
+    assert len(model.pending["a"]) == 3  # two were labelled safe
+    safe = model.theta.copy()
+    model.learn("a", one_state(), z, 2, 1, ended=True)  # a failure of criterion 1
+    assert "a" not in model.pending and model.failures == 1
+    risk = np.empty((3, 2))
+    model.read(one_state(), z, risk)
+    assert risk[1, 1] > 0.1 and risk[1, 0] == 0.0  # criterion 1's risk rose, 0's did not
+    assert not np.array_equal(model.theta, safe)
+
+
+def test_the_risk_follows_the_observation_within_one_state() -> None:
+    # one broad state; failures follow only from small x: far from them the risk stays low
+    model = LocalRisk(dim=1, n_criteria=1, n_bins=3, horizon=2, max_states=2)
+    model.add_state()
+    rng = np.random.default_rng(1)
+    for episode in range(400):
+        x = rng.uniform(0, 1)
+        model.learn(str(episode), one_state(), np.array([x]), 1, 0 if x < 0.2 else None,
+                    ended=True)
+    near, far = np.empty((3, 1)), np.empty((3, 1))
+    model.read(one_state(), np.array([0.05]), near)
+    model.read(one_state(), np.array([0.9]), far)
+    assert near[1, 0] > 0.2 and far[1, 0] < 0.05
+
+
+def test_the_shield_learns_to_refuse_the_action_that_crashed() -> None:
+    config = ShieldConfig.from_dict({**LOCAL, "reviser": {"activate_after_episodes": 20}})
+    shield = Shield(config)
+    crash_world(shield, 20, seed=1)
+    assert shield.local_risk is not None and shield.local_risk.failures > 0
+    decision = shield.step([28.0, 20.0, 10.0], 1.9)
+    assert decision.revised and decision.action is not None and decision.action < 1.9
+    assert decision.risk["collision"] > 0.0 and decision.candidates
+    later = crash_world(shield, 50, seed=2)
+    assert later < crash_world(Shield(ShieldConfig.from_dict(
+        {**LOCAL, "reviser": {"activate_after_episodes": 10**6}})), 50, seed=2)
+
+
+def test_a_model_with_pending_steps_round_trips_and_decides_alike() -> None:
+    config = ShieldConfig.from_dict(LOCAL)
+    shield = Shield(config)
+    crash_world(shield, 15, seed=3)
+    for t in range(3):  # a stream left in the middle of an episode
+        shield.step([12.0 + t, 30.0, 11.0], 0.5, stream="open")
+    assert shield.local_risk is not None and shield.local_risk.pending
+    copy = Shield.from_snapshot(shield.snapshot())
+    assert_same(copy.snapshot(), shield.snapshot())
+    for speed in (25.0, 28.0, 12.0):
+        first = shield.step([speed, 20.0, 10.0], 1.9, stream="open")
+        second = copy.step([speed, 20.0, 10.0], 1.9, stream="open")
+        assert first.to_dict() == second.to_dict()
+    twin, again = Shield(config), Shield(config)
+    crash_world(twin, 15, seed=3)  # deterministic: the same inputs make the same model
+    crash_world(again, 15, seed=3)
+    assert_same(again.snapshot()["local_risk"], twin.snapshot()["local_risk"])
+
+
+@pytest.mark.parametrize(("damage", "field"), [
+    ("theta", "local_risk.theta"),
+    ("lengths", "local_risk.lengths"),
+    ("index", "local_risk.index"),
+    ("stream", "local_risk.streams"),
+])
+def test_a_damaged_local_model_is_refused_naming_its_part(damage: str, field: str) -> None:
+    shield = Shield(ShieldConfig.from_dict(LOCAL))
+    crash_world(shield, 10, seed=4)
+    shield.step([12.0, 30.0, 11.0], 0.5, stream="open")
+    shield.step([12.0, 31.0, 11.0], 0.5, stream="open")
+    data = shield.snapshot()
+    local = data["local_risk"]
+    if damage == "theta":
+        local["theta"] = local["theta"][:-1]
+    elif damage == "lengths":
+        local["lengths"] = local["lengths"] + 10
+    elif damage == "index":
+        local["index"] = local["index"] + 10_000
+    else:
+        local["streams"] = ["nobody"]
+    with pytest.raises(InvalidSnapshot) as error:
+        Shield.from_snapshot(data)
+    assert error.value.field == field
+
+
+def test_a_bad_risk_model_names_its_field() -> None:
+    with pytest.raises(InvalidConfig) as error:
+        ShieldConfig.from_dict({"risk": {"model": "oracle"}})
+    assert error.value.field == "risk.model"
