@@ -20,6 +20,12 @@ which is exact least squares on the labelled steps, with a weak ridge prior ``1 
 The label is the outcome under the behaviour that followed (controller and shield); a
 revised step is learned for the action applied, never for the proposal.
 
+**Actions not yet tried.** A linear model extrapolates in the action, and from a controller
+that brakes only when it is too late it learns that braking goes with crashing. So a state's
+model answers only for the bins applied in that state; a bin never tried there takes the risk
+of the nearest tried bin on its safe side for that criterion, or none when no bin on its safe
+side was tried: the shield may choose it, and then learns what it does.
+
 **Monotone prior.** Each criterion's direction gives the safe side (braking never raises the
 risk of a collision), so the risks over the action bins are lifted to their running maximum
 from the safe end (:func:`app.core.risk.monotone`), as for the counted model.
@@ -59,6 +65,7 @@ class LocalRisk:
         self._n = 0
         self._theta = np.zeros((0, n_criteria, self.size))
         self._cov = np.zeros((0, self.size, self.size))
+        self._tried = np.zeros((0, n_bins), dtype=np.int64)  # steps per state and bin
         self.midpoints = (np.arange(n_bins) + 0.5) / n_bins
         self.pending: dict[str, list[Step]] = {}  # per stream, the steps awaiting labels
         self.failures = 0  # failures learned: none yet means nothing to revise against
@@ -80,8 +87,10 @@ class LocalRisk:
         n = self._n
         self._theta = ensure_capacity(self._theta, n + 1, self.max_states)
         self._cov = ensure_capacity(self._cov, n + 1, self.max_states)
+        self._tried = ensure_capacity(self._tried, n + 1, self.max_states)
         self._theta[n] = 0.0
         self._cov[n] = np.eye(self.size) * PRIOR_COV
+        self._tried[n] = 0
         self._n = n + 1
 
     def features(self, z: FloatArray, action_bin: int) -> FloatArray:
@@ -97,6 +106,7 @@ class LocalRisk:
         """The stream's previous step (``belief`` and ``z`` before it, ``action_bin`` applied)
         ended in ``failure`` (a criterion index) or not; ``ended`` closes its episode."""
         queue = self.pending.setdefault(stream, [])
+        self._tried[belief.argmax(), action_bin] += 1
         queue.append((belief.index.copy(), belief.prob.copy(), self.features(z, action_bin)))
         labels = np.zeros(self.n_criteria)
         if failure is not None:
@@ -113,10 +123,19 @@ class LocalRisk:
         """Drop a stream's unlabelled steps (a stream that expired)."""
         self.pending.pop(stream, None)
 
-    def read(self, belief: Belief, z: FloatArray, out: FloatArray) -> None:
-        """``out`` (bins x criteria): each action's risk at ``z`` under ``belief``, before
-        the monotone prior."""
-        _read(self._theta, belief.index, belief.prob, z, self.midpoints, out)
+    @property
+    def tried(self) -> IntArray:
+        """Steps learned per state (the belief's most likely) and action bin (read-only)."""
+        view = self._tried[: self._n]
+        view.flags.writeable = False
+        return view
+
+    def read(self, belief: Belief, z: FloatArray, safe: IntArray, out: FloatArray) -> None:
+        """``out`` (bins x criteria): each action's risk at ``z`` under ``belief``, untried
+        bins as their nearest tried bin on the safe side (``safe`` per criterion from
+        :func:`app.core.risk.safe_steps`), before the monotone prior."""
+        _read(self._theta, self._tried, belief.index, belief.prob, z, self.midpoints, safe,
+              out)
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state as arrays: the weights, their covariances and the pending steps."""
@@ -130,6 +149,7 @@ class LocalRisk:
                 phi.append(f)
         sizes = [i.size for i in index]
         return {"theta": self.theta.copy(), "cov": self._cov[: self._n].copy(),
+                "tried": self.tried.copy(),
                 "failures": self.failures, "streams": names,
                 "lengths": np.array(lengths, dtype=np.int64),
                 "sizes": np.array(sizes, dtype=np.int64),
@@ -145,7 +165,9 @@ class LocalRisk:
         m = self.size
         theta = stored.floats(data["theta"], "local_risk.theta", (n_states, n_criteria, m))
         cov = stored.floats(data["cov"], "local_risk.cov", (n_states, m, m))
+        tried = stored.ints(data["tried"], "local_risk.tried", (n_states, n_bins), low=0)
         self._theta, self._cov, self._n = theta.copy(), cov.copy(), n_states
+        self._tried = tried.copy()
         self.failures = stored.integer(data["failures"], "local_risk.failures")
         names = data["streams"]
         if not isinstance(names, list) or not all(isinstance(s, str) for s in names):
@@ -199,17 +221,23 @@ def _fit(theta: FloatArray, cov: FloatArray, index: IntArray, prob: FloatArray,
 
 
 @njit(cache=True)
-def _read(theta: FloatArray, index: IntArray, prob: FloatArray, z: FloatArray,
-          midpoints: FloatArray, out: FloatArray) -> None:
-    """Each action's risk per criterion under the belief, clipped to [0, 1]."""
-    d = z.shape[0]
-    for a in range(midpoints.shape[0]):
+def _read(theta: FloatArray, tried: IntArray, index: IntArray, prob: FloatArray,
+          z: FloatArray, midpoints: FloatArray, safe: IntArray, out: FloatArray) -> None:
+    """Each action's risk per criterion under the belief, clipped to [0, 1]: per belief state,
+    its model on the bins tried there, the nearest tried bin on the safe side (or 0) on the
+    others."""
+    d, q = z.shape[0], midpoints.shape[0]
+    out[:] = 0.0
+    for t in range(index.shape[0]):
+        i = index[t]
         for c in range(theta.shape[1]):
-            total = 0.0
-            for t in range(index.shape[0]):
-                i = index[t]
-                value = theta[i, c, 0] + theta[i, c, d + 1] * midpoints[a]
-                for r in range(d):
-                    value += theta[i, c, r + 1] * z[r]
-                total += prob[t] * value
-            out[a, c] = min(max(total, 0.0), 1.0)
+            base = theta[i, c, 0]
+            for r in range(d):
+                base += theta[i, c, r + 1] * z[r]
+            first, last, way = (0, q, 1) if safe[c] < 0 else (q - 1, -1, -1)
+            carried = 0.0
+            for a in range(first, last, way):
+                if tried[i, a] > 0:
+                    value = base + theta[i, c, d + 1] * midpoints[a]
+                    carried = min(max(value, 0.0), 1.0)
+                out[a, c] += prob[t] * carried

@@ -614,7 +614,7 @@ class Shield:
             verdicts = np.empty(cfg.action.n_bins, dtype=np.int64)
             table, index_, prob = self._risk_table, belief.index, belief.prob
             if local is not None:  # this observation's own row, under the monotone prior
-                local.read(belief, z, by_bin)
+                local.read(belief, z, self._safe_steps, by_bin)
                 table, index_, prob = np.empty((1,) + by_bin.shape), ONE_STATE, ONE
                 risk.monotone(by_bin[None], self._safe_steps, table)
             limit, worst, final, kept = risk.decide(

@@ -13,6 +13,7 @@ from tests.core.test_risk import crash_world
 from tests.utils import assert_same
 
 LOCAL = {"risk": {"model": "local", "horizon": 4}}
+SAFE = np.array([-1, 1], dtype=np.int64)  # collision-like, then falling-behind-like
 
 
 def one_state(weight: float = 1.0) -> Belief:
@@ -49,9 +50,31 @@ def test_a_step_is_labelled_safe_after_the_horizon_and_failed_when_a_failure_fol
     model.learn("a", one_state(), z, 2, 1, ended=True)  # a failure of criterion 1
     assert "a" not in model.pending and model.failures == 1
     risk = np.empty((3, 2))
-    model.read(one_state(), z, risk)
+    model.read(one_state(), z, SAFE, risk)
     assert risk[1, 1] > 0.1 and risk[1, 0] == 0.0  # criterion 1's risk rose, 0's did not
     assert not np.array_equal(model.theta, safe)
+
+
+def test_an_untried_bin_takes_its_nearest_tried_bin_on_the_safe_side_or_none() -> None:
+    # one state, bins 0..4; only bins 1 and 3 applied there, both ended in failures of both
+    model = LocalRisk(dim=1, n_criteria=2, n_bins=5, horizon=1, max_states=2)
+    model.add_state()
+    for t in range(30):
+        model.learn(str(t), one_state(), np.array([0.5]), 1 + 2 * (t % 2), t % 2, ended=True)
+    risk = np.empty((5, 2))
+    model.read(one_state(), np.array([0.5]), SAFE, risk)
+    tried = np.empty((5, 2))
+    tried[:] = np.nan
+    for b in (1, 3):
+        value = model.theta[0] @ model.features(np.array([0.5]), b)
+        tried[b] = np.clip(value, 0.0, 1.0)
+    # criterion 0 is safe towards bin 0: bin 0 has nothing tried on its safe side
+    assert risk[:, 0].tolist() == pytest.approx([0.0, tried[1, 0], tried[1, 0], tried[3, 0],
+                                                 tried[3, 0]])
+    # criterion 1 is safe towards bin 4
+    assert risk[:, 1].tolist() == pytest.approx([tried[1, 1], tried[1, 1], tried[3, 1],
+                                                 tried[3, 1], 0.0])
+    assert model.tried[0].tolist() == [0, 15, 0, 15, 0]
 
 
 def test_the_risk_follows_the_observation_within_one_state() -> None:
@@ -64,8 +87,8 @@ def test_the_risk_follows_the_observation_within_one_state() -> None:
         model.learn(str(episode), one_state(), np.array([x]), 1, 0 if x < 0.2 else None,
                     ended=True)
     near, far = np.empty((3, 1)), np.empty((3, 1))
-    model.read(one_state(), np.array([0.05]), near)
-    model.read(one_state(), np.array([0.9]), far)
+    model.read(one_state(), np.array([0.05]), SAFE[:1], near)
+    model.read(one_state(), np.array([0.9]), SAFE[:1], far)
     assert near[1, 0] > 0.2 and far[1, 0] < 0.05
 
 
@@ -103,6 +126,7 @@ def test_a_model_with_pending_steps_round_trips_and_decides_alike() -> None:
 
 @pytest.mark.parametrize(("damage", "field"), [
     ("theta", "local_risk.theta"),
+    ("tried", "local_risk.tried"),
     ("lengths", "local_risk.lengths"),
     ("index", "local_risk.index"),
     ("stream", "local_risk.streams"),
@@ -116,6 +140,8 @@ def test_a_damaged_local_model_is_refused_naming_its_part(damage: str, field: st
     local = data["local_risk"]
     if damage == "theta":
         local["theta"] = local["theta"][:-1]
+    elif damage == "tried":
+        local["tried"] = -local["tried"] - 1
     elif damage == "lengths":
         local["lengths"] = local["lengths"] + 10
     elif damage == "index":
