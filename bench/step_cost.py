@@ -16,6 +16,7 @@ model's in the same run.
 
     python bench/step_cost.py                        # 10, 1000 and 5000 states
     python bench/step_cost.py --sizes 10 1000 --rounds 3 --steps 2000
+    python bench/step_cost.py --model local          # the local risk model (risk.model)
 """
 
 from __future__ import annotations
@@ -41,11 +42,13 @@ SEED = 0
 CRITERIA = ("collision", "large_distance")
 
 
-def build(n: int, seed: int = SEED) -> Shield:
-    """A default shield of n states with a learned history, the reviser active."""
+def build(n: int, seed: int = SEED, model: str = "counts") -> Shield:
+    """A default shield of n states (the risk ``model`` given) with a learned history, the
+    reviser active."""
     config = ShieldConfig(
         reviser=ReviserConfig(seed=seed, activate_after_episodes=0),
-        risk=RiskConfig(refresh_steps=10**9),
+        risk=RiskConfig(model=model, horizon=24 if model == "local" else 8,  # type: ignore[arg-type]
+                        refresh_steps=10**9),
         limits=LimitsConfig(max_states=n),
     )
     rng = np.random.default_rng(seed)
@@ -55,15 +58,18 @@ def build(n: int, seed: int = SEED) -> Shield:
     z = rng.uniform(0, 1, 3)
     prev = recognise(shield.clusterer.sq_distances(z), variances, k)
     for t in range(40 * n):
-        z = np.clip(z + rng.normal(0, 0.05, 3), 0, 1)
+        before, z = z, np.clip(z + rng.normal(0, 0.05, 3), 0, 1)
         belief = recognise(shield.clusterer.sq_distances(z), variances, k)
         action = int(rng.integers(20))
         if t % 2 == 0:
             shield.transitions.learn_one(prev, action, belief)
-        if rng.random() < 0.005:
-            shield.outcomes.learn_failure(prev.argmax(), action, int(rng.integers(2)))
+        failure = int(rng.integers(2)) if rng.random() < 0.005 else None
+        if failure is not None:
+            shield.outcomes.learn_failure(prev.argmax(), action, failure)
         else:
             shield.outcomes.learn_move(prev.argmax(), action, belief.argmax())
+        if shield.local_risk is not None:
+            shield.local_risk.learn("history", prev, before, action, failure, ended=False)
         prev = belief
     shield._refresh_risk()
     return shield
@@ -96,10 +102,11 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[10, 1000, 5000])
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=5000)
+    parser.add_argument("--model", choices=["counts", "local"], default="counts")
     args = parser.parse_args()
     rows: list[dict[str, Any]] = []
     for n in args.sizes:
-        shield = build(n)
+        shield = build(n, model=args.model)
         time_steps(shield, steps(200, SEED + 99, "keep"))  # compiled and warm
         row: dict[str, Any] = {"states": n}
         for workload in ("keep", "revise"):
@@ -109,8 +116,9 @@ def main() -> None:
                 times.append(t)
             row[workload] = (statistics.median(times) * 1e6, share)
         rows.append(row)
-    print(f"seed {SEED}; {args.rounds} rounds of {args.steps} steps; median of round means; "
-          f"{platform.machine()}, numpy {np.__version__}, Python {platform.python_version()}\n")
+    print(f"risk model {args.model}; seed {SEED}; {args.rounds} rounds of {args.steps} steps; "
+          f"median of round means; {platform.machine()}, numpy {np.__version__}, "
+          f"Python {platform.python_version()}\n")
     print("| states | keep: step (us) | x smallest | revised | revise: step (us) | x smallest "
           "| revised |")
     print("|---:|---:|---:|---:|---:|---:|---:|")

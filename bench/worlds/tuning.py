@@ -1,12 +1,12 @@
 """The tuning worlds: the project's own car-following simulator (``client/sim``) with its
 non-learning controllers: the aggressive IDM (it collides), the sluggish one (it falls behind),
 the ordinary one reacting 2 s late (both), the random one, and a collapsed one that always
-brakes fully, as a DDPG actor stuck at its bound does (the shield has to drive). Each comes twice: with the project's car-following
-configuration, and (``_plain``) with the one a new user would write, the simulator's ranges
-scaled linearly (headway over 200 m, no knee), which gives the model few, broad states as the
-held-out worlds' configurations do. Beside them the tank (:mod:`bench.worlds.tank`), a world
-of another make. Defaults are chosen here (and on the DDPG protocol's tuning seeds), never on
-the held-out worlds beside this module.
+brakes fully, as a DDPG actor stuck at its bound does (the shield has to drive). Each comes
+twice: with the project's car-following configuration, and (``_plain``) with the one a new
+user would write, the simulator's ranges scaled linearly (headway over 200 m, no knee),
+which gives the model few, broad states as the held-out worlds' configurations do. Beside
+them the tank (:mod:`bench.worlds.tank`), a world of another make. Defaults are chosen here
+(and on the DDPG protocol's tuning seeds), never on the held-out worlds beside this module.
 
 ``python -m bench.worlds --seeds 0,1 --worlds tuning``
 """
