@@ -164,7 +164,9 @@ class LocalRisk:
         self = cls(dim, n_criteria, n_bins, horizon, max_states)
         m = self.size
         theta = stored.floats(data["theta"], "local_risk.theta", (n_states, n_criteria, m))
-        cov = stored.floats(data["cov"], "local_risk.cov", (n_states, m, m))
+        # the covariance only shrinks from PRIOR_COV * I as steps are fitted
+        cov = stored.floats(data["cov"], "local_risk.cov", (n_states, m, m), low=-PRIOR_COV,
+                            high=PRIOR_COV)
         tried = stored.ints(data["tried"], "local_risk.tried", (n_states, n_bins), low=0)
         self._theta, self._cov, self._n = theta.copy(), cov.copy(), n_states
         self._tried = tried.copy()

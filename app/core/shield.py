@@ -435,7 +435,8 @@ class Shield:
                        step: StepInput) -> None:
         """Count what the stream's previous action led to: the recognised state, or the
         failure of this step's event (an absorbing outcome), and log it to count again later
-        (:mod:`app.core.outcome_log`). Only the risk reviser reads them, so the paper's
+        (:mod:`app.core.outcome_log`); with the local risk model, queue the step for its label
+        instead (:mod:`app.core.local_risk`). Only the risk reviser reads them, so the paper's
         counts nothing here."""
         if state.belief is None or self.config.reviser.method != "risk":
             return
@@ -539,7 +540,8 @@ class Shield:
         index: int,
         rng: np.random.Generator,
     ) -> Decision:
-        """Algs. 1-3 on the proposed action, and the revision with its noise."""
+        """Algs. 1-3 on the proposed action, and the revision with its noise (``z``, the
+        normalised observation, is for the risk reviser's local model)."""
         cfg = self.config
         proposed = step.action
         assert proposed is not None

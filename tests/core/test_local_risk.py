@@ -127,6 +127,7 @@ def test_a_model_with_pending_steps_round_trips_and_decides_alike() -> None:
 @pytest.mark.parametrize(("damage", "field"), [
     ("theta", "local_risk.theta"),
     ("tried", "local_risk.tried"),
+    ("cov", "local_risk.cov"),
     ("lengths", "local_risk.lengths"),
     ("index", "local_risk.index"),
     ("stream", "local_risk.streams"),
@@ -142,6 +143,8 @@ def test_a_damaged_local_model_is_refused_naming_its_part(damage: str, field: st
         local["theta"] = local["theta"][:-1]
     elif damage == "tried":
         local["tried"] = -local["tried"] - 1
+    elif damage == "cov":
+        local["cov"] = local["cov"] * 1e6
     elif damage == "lengths":
         local["lengths"] = local["lengths"] + 10
     elif damage == "index":
@@ -151,6 +154,19 @@ def test_a_damaged_local_model_is_refused_naming_its_part(damage: str, field: st
     with pytest.raises(InvalidSnapshot) as error:
         Shield.from_snapshot(data)
     assert error.value.field == field
+
+
+def test_extreme_observations_leave_every_risk_a_probability() -> None:
+    shield = Shield(ShieldConfig.from_dict(LOCAL))
+    crash_world(shield, 10, seed=5)
+    rng = np.random.default_rng(5)
+    for t in range(300):
+        big = [float(v) for v in rng.choice([-1e12, 1e12, 0.0, 1e-300], 3)]  # the bounds
+        decision = shield.step(big, float(rng.uniform(-2, 2)), done=t % 20 == 19,
+                               event="collision" if t % 40 == 39 else None)
+        for value in decision.risk.values():
+            assert 0.0 <= value <= 1.0
+    assert shield.local_risk is not None and np.isfinite(shield.local_risk.theta).all()
 
 
 def test_a_bad_risk_model_names_its_field() -> None:
