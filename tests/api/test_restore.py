@@ -194,3 +194,29 @@ def test_the_untouched_snapshots_still_restore(
     assert client.put("/models/copy-json", json=snapshot).status_code == 200
     assert client.put("/models/copy-npz", content=npz,
                       headers={"content-type": "application/x-npz"}).status_code == 200
+
+
+def test_a_local_risk_model_round_trips_over_http_and_refuses_its_damage() -> None:
+    with TestClient(create_app(Settings(max_snapshot_bytes=LIMIT))) as c:
+        config = {"risk": {"model": "local", "horizon": 4}}
+        assert c.post("/models", json={"name": "l", "config": config}).status_code == 201
+        for _ in range(3):
+            episode(c, "/models/l/revise")
+        step = {"observation": [12.0, 3.0, 11.0], "action": 1.5, "stream": "open"}
+        for _ in range(2):  # the second step queues the first for its label
+            c.post("/models/l/revise", json=step)
+        snapshot = c.get("/models/l", params={"tpm": "none"}).json()
+        assert snapshot["exact"]["local_risk"]["streams"] == ["open"]
+        npz = c.get("/models/l", params={"format": "npz"}).content
+        assert c.put("/models/l-json", json=snapshot).status_code == 200
+        assert c.put("/models/l-npz", content=npz,
+                     headers={"content-type": "application/x-npz"}).status_code == 200
+        answers = [c.post(f"/models/{name}/revise", json=step).json()
+                   for name in ("l", "l-json", "l-npz")]
+        assert answers[0]["risk"] == answers[1]["risk"] == answers[2]["risk"]
+        assert answers[0]["action"] == answers[1]["action"] == answers[2]["action"]
+        broken = copy.deepcopy(snapshot)
+        tagged(broken, "local_risk", "theta")["data"][0] = float("nan")
+        r = c.put("/models/l", content=json.dumps(broken),
+                  headers={"content-type": "application/json"})
+        assert r.status_code == 422 and r.json()["error"]["field"] == "local_risk.theta"
