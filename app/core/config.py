@@ -250,15 +250,16 @@ class RiskConfig:
     within ``horizon`` steps) is at most ``threshold`` or within ``margin`` of the safest
     action's; otherwise the nearest allowed action replaces it. The defaults act on any
     measurable difference (docs/risk-reviser.md). ``model`` says how the risk is estimated:
-    ``counts``, per (state, action) outcome counts and value iteration under the safest known
-    continuation (:mod:`app.core.risk`); ``local``, a linear model per state in the observation
-    and the action of what followed each step (:mod:`app.core.local_risk`). For ``counts``,
+    ``local`` (the default), a linear model per state in the observation and the action of
+    what followed each step (:mod:`app.core.local_risk`); ``counts``, per (state, action)
+    outcome counts and value iteration under the safest known continuation
+    (:mod:`app.core.risk`, the default before, with a horizon of 8). For ``counts``,
     ``prior_safe`` is the number of safe pseudo-tries every (state, action) starts with, and
     the risk table is rebuilt at every episode end and after ``refresh_steps`` steps.
     """
 
-    model: Literal["local", "counts"] = "counts"
-    horizon: int = 8
+    model: Literal["local", "counts"] = "local"
+    horizon: int = 24
     threshold: float = 0.0
     margin: float = 0.001
     prior_safe: float = 1.0

@@ -68,7 +68,7 @@ class LocalRisk:
         self._tried = np.zeros((0, n_bins), dtype=np.int64)  # steps per state and bin
         self.midpoints = (np.arange(n_bins) + 0.5) / n_bins
         self.pending: dict[str, list[Step]] = {}  # per stream, the steps awaiting labels
-        self.failures = 0  # failures learned: none yet means nothing to revise against
+        self.failures = np.zeros(n_criteria, dtype=np.int64)  # learned, per criterion
 
     @property
     def n_states(self) -> int:
@@ -111,7 +111,7 @@ class LocalRisk:
         labels = np.zeros(self.n_criteria)
         if failure is not None:
             labels[failure] = 1.0
-            self.failures += 1
+            self.failures[failure] += 1
         if failure is not None or ended:
             for step in queue:
                 _fit(self._theta, self._cov, *step, labels)
@@ -150,7 +150,7 @@ class LocalRisk:
         sizes = [i.size for i in index]
         return {"theta": self.theta.copy(), "cov": self._cov[: self._n].copy(),
                 "tried": self.tried.copy(),
-                "failures": self.failures, "streams": names,
+                "failures": self.failures.copy(), "streams": names,
                 "lengths": np.array(lengths, dtype=np.int64),
                 "sizes": np.array(sizes, dtype=np.int64),
                 "index": np.concatenate(index) if index else np.zeros(0, dtype=np.int64),
@@ -170,7 +170,7 @@ class LocalRisk:
         tried = stored.ints(data["tried"], "local_risk.tried", (n_states, n_bins), low=0)
         self._theta, self._cov, self._n = theta.copy(), cov.copy(), n_states
         self._tried = tried.copy()
-        self.failures = stored.integer(data["failures"], "local_risk.failures")
+        self.failures = stored.ints(data["failures"], "local_risk.failures", (n_criteria,)).copy()
         names = data["streams"]
         if not isinstance(names, list) or not all(isinstance(s, str) for s in names):
             raise InvalidSnapshot("pending streams must be names", field="local_risk.streams")

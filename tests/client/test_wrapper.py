@@ -160,8 +160,8 @@ def test_a_failure_that_does_not_end_the_episode_is_learned() -> None:
     infos = pushing(5, env)
     bumps = sum(i["event"] == "bump" for i in infos)
     assert bumps > 0
-    outcomes = env.shield.shield.outcomes  # type: ignore[attr-defined]
-    assert outcomes.failures[..., 1].sum() == bumps
+    learned = env.shield.shield.local_risk.failures  # type: ignore[attr-defined]
+    assert learned[1] == bumps
 
 
 def test_a_failure_predicate_replaces_info() -> None:
@@ -171,7 +171,7 @@ def test_a_failure_predicate_replaces_info() -> None:
 
     env = ShieldWrapper(Ledge(), criteria=EDGE, failure=low)
     pushing(5, env)
-    assert env.shield.shield.outcomes.failures.sum() > 0  # type: ignore[attr-defined]
+    assert env.shield.shield.local_risk.failures.sum() > 0  # type: ignore[attr-defined]
 
 
 def test_the_same_seed_gives_the_same_shield_and_evaluation_learns_nothing() -> None:

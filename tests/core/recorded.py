@@ -18,11 +18,14 @@ import numpy as np
 import numpy.typing as npt
 
 from app.core import Shield, ShieldConfig
+from app.core.config import RiskConfig
 
 DATA = Path(__file__).parent.parent / "data"
 STEPS = 12_000
 EPISODE = 400  # steps before an episode ends without a failure
-PRESETS = {"default": ShieldConfig, "paper": ShieldConfig.paper}
+PRESETS = {"default": ShieldConfig, "paper": ShieldConfig.paper,
+           # the risk reviser's counted model, the default until the local model
+           "counts": lambda: ShieldConfig(risk=RiskConfig(model="counts", horizon=8))}
 
 
 def preset(name: str) -> ShieldConfig:
@@ -34,7 +37,8 @@ def preset(name: str) -> ShieldConfig:
 
 def drive(config: ShieldConfig, steps: int = STEPS, seed: int = 0) -> dict[str, npt.NDArray]:
     """Run the loop; per step the applied action, recognised state, state count, whether the
-    step was revised, why and the verdict, and the closing snapshot's risk table."""
+    step was revised, why and the verdict, and the closing snapshot's risk table and local
+    risk weights (empty without the local model)."""
     rng = np.random.default_rng(seed)
     shield = Shield(config)
     applied = np.full(steps, np.nan)
@@ -64,9 +68,11 @@ def drive(config: ShieldConfig, steps: int = STEPS, seed: int = 0) -> dict[str, 
         n_states[t] = decision.n_states
         revised[t] = decision.revised
         reason[t], verdict[t] = decision.reason, decision.verdict
-    table = shield.snapshot()["risk"]["table"]
+    snapshot = shield.snapshot()
+    local = snapshot["local_risk"]
     return {"applied": applied, "state": state, "n_states": n_states, "revised": revised,
-            "reason": reason, "verdict": verdict, "risk_table": table}
+            "reason": reason, "verdict": verdict, "risk_table": snapshot["risk"]["table"],
+            "local_theta": np.zeros(0) if local is None else local["theta"]}
 
 
 def path(name: str) -> Path:
@@ -74,7 +80,9 @@ def path(name: str) -> Path:
     return DATA / f"recorded-{name}.npz"
 
 
-if __name__ == "__main__":
-    for name in PRESETS:
+if __name__ == "__main__":  # python -m tests.core.recorded [NAME ...]: those, or every one
+    import sys
+
+    for name in sys.argv[1:] or PRESETS:
         np.savez_compressed(path(name), **drive(preset(name)))
         print(f"wrote {path(name)}")  # noqa: T201
