@@ -1,4 +1,5 @@
-"""Growable numpy buffers: states are added one at a time, so arrays grow by doubling."""
+"""Growable numpy buffers (states are added one at a time, so arrays grow by doubling) and
+the read-only views handed out of them."""
 
 from __future__ import annotations
 
@@ -26,3 +27,9 @@ def ensure_capacity(
     index[axis] = slice(0, capacity)
     grown[tuple(index)] = array
     return grown
+
+
+def read_only(view: npt.NDArray[Any]) -> npt.NDArray[Any]:
+    """``view`` marked read-only: the tables' properties hand out views, never copies."""
+    view.flags.writeable = False
+    return view

@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from app.core import _stored as stored
-from app.core._arrays import ensure_capacity
+from app.core._arrays import ensure_capacity, read_only
 from app.core.errors import InvalidSnapshot
 
 IntArray = npt.NDArray[np.int64]
@@ -38,23 +38,23 @@ class StateFlags:
     @property
     def flags(self) -> npt.NDArray[np.int64]:
         """Flag of every state (read-only)."""
-        return _read_only(self._flags[: self._n])
+        return read_only(self._flags[: self._n])
 
     @property
     def visits(self) -> npt.NDArray[np.int64]:
         """How often each state was the recognised one (read-only view)."""
-        return _read_only(self._visits[: self._n])
+        return read_only(self._visits[: self._n])
 
     @property
     def entries(self) -> npt.NDArray[np.int64]:
         """How often a stream came into each state from another one, or began there
         (read-only view)."""
-        return _read_only(self._entries[: self._n])
+        return read_only(self._entries[: self._n])
 
     @property
     def failures(self) -> npt.NDArray[np.int64]:
         """Failures of each criterion recognised in each state, n x criteria (read-only)."""
-        return _read_only(self._failures[: self._n])
+        return read_only(self._failures[: self._n])
 
     def flagged(self) -> tuple[IntArray, IntArray]:
         """The flagged states (ascending) and their flags: the reviser reads only these."""
@@ -128,8 +128,3 @@ def _counts(data: Any, field: str, n: int) -> IntArray:
     if data is None:
         return np.zeros(n, dtype=np.int64)
     return stored.ints(data, field, (n,))
-
-
-def _read_only(view: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
-    view.flags.writeable = False
-    return view

@@ -33,6 +33,7 @@ from the safe end (:func:`app.core.risk.monotone`), as for the counted model.
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -40,7 +41,7 @@ import numpy.typing as npt
 from numba import njit
 
 from app.core import _stored as stored
-from app.core._arrays import ensure_capacity
+from app.core._arrays import ensure_capacity, read_only
 from app.core.belief import Belief
 from app.core.errors import InvalidSnapshot
 
@@ -67,20 +68,13 @@ class LocalRisk:
         self._cov = np.zeros((0, self.size, self.size))
         self._tried = np.zeros((0, n_bins), dtype=np.int64)  # steps per state and bin
         self.midpoints = (np.arange(n_bins) + 0.5) / n_bins
-        self.pending: dict[str, list[Step]] = {}  # per stream, the steps awaiting labels
+        self.pending: dict[str, deque[Step]] = {}  # per stream, the steps awaiting labels
         self.failures = np.zeros(n_criteria, dtype=np.int64)  # learned, per criterion
-
-    @property
-    def n_states(self) -> int:
-        """Number of states modelled."""
-        return self._n
 
     @property
     def theta(self) -> FloatArray:
         """The weights, states x criteria x [1, z, u] (read-only view)."""
-        view = self._theta[: self._n]
-        view.flags.writeable = False
-        return view
+        return read_only(self._theta[: self._n])
 
     def add_state(self) -> None:
         """A new state: no risk until it learns otherwise, weights free to move."""
@@ -105,9 +99,10 @@ class LocalRisk:
               failure: int | None, ended: bool) -> None:
         """The stream's previous step (``belief`` and ``z`` before it, ``action_bin`` applied)
         ended in ``failure`` (a criterion index) or not; ``ended`` closes its episode."""
-        queue = self.pending.setdefault(stream, [])
+        queue = self.pending.setdefault(stream, deque())
         self._tried[belief.argmax(), action_bin] += 1
-        queue.append((belief.index.copy(), belief.prob.copy(), self.features(z, action_bin)))
+        # a step's belief arrays are its own and never written after (no copy needed)
+        queue.append((belief.index, belief.prob, self.features(z, action_bin)))
         labels = np.zeros(self.n_criteria)
         if failure is not None:
             labels[failure] = 1.0
@@ -117,7 +112,7 @@ class LocalRisk:
                 _fit(self._theta, self._cov, *step, labels)
             del self.pending[stream]
         elif len(queue) > self.horizon:  # old enough: no failure followed within the horizon
-            _fit(self._theta, self._cov, *queue.pop(0), labels)
+            _fit(self._theta, self._cov, *queue.popleft(), labels)
 
     def forget(self, stream: str) -> None:
         """Drop a stream's unlabelled steps (a stream that expired)."""
@@ -126,9 +121,7 @@ class LocalRisk:
     @property
     def tried(self) -> IntArray:
         """Steps learned per state (the belief's most likely) and action bin (read-only)."""
-        view = self._tried[: self._n]
-        view.flags.writeable = False
-        return view
+        return read_only(self._tried[: self._n])
 
     def read(self, belief: Belief, z: FloatArray, safe: IntArray, out: FloatArray) -> None:
         """``out`` (bins x criteria): each action's risk at ``z`` under ``belief``, untried
@@ -184,7 +177,7 @@ class LocalRisk:
         phi = stored.floats(data["phi"], "local_risk.phi", (steps, m))
         at = row = 0
         for name, length in zip(names, lengths.tolist(), strict=True):
-            queue = self.pending.setdefault(name, [])
+            queue = self.pending.setdefault(name, deque())
             for _ in range(length):
                 size = int(sizes[row])
                 queue.append((index[at:at + size].copy(), prob[at:at + size].copy(),

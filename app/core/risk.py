@@ -37,7 +37,7 @@ import numpy.typing as npt
 from numba import njit
 
 from app.core import _stored as stored
-from app.core._arrays import ensure_capacity
+from app.core._arrays import ensure_capacity, read_only
 from app.core.errors import InvalidSnapshot
 
 FloatArray = npt.NDArray[np.float64]
@@ -74,12 +74,12 @@ class OutcomeCounts:
     @property
     def tries(self) -> IntArray:
         """How often each action was applied in each state, n x q (read-only view)."""
-        return _read_only(self._tries[: self._n])
+        return read_only(self._tries[: self._n])
 
     @property
     def failures(self) -> IntArray:
         """Failures per criterion that each (state, action) ended in, n x q x C (read-only)."""
-        return _read_only(self._failures[: self._n])
+        return read_only(self._failures[: self._n])
 
     @property
     def any_failure(self) -> bool:
@@ -89,8 +89,8 @@ class OutcomeCounts:
     def moves(self) -> tuple[IntArray, IntArray, IntArray]:
         """The sparse moves: row ``s * q + a``, next state ``j``, count (read-only views)."""
         m = self._m
-        return (_read_only(self._rows[:m]), _read_only(self._cols[:m]),
-                _read_only(self._moves[:m]))
+        return (read_only(self._rows[:m]), read_only(self._cols[:m]),
+                read_only(self._moves[:m]))
 
     def add_state(self) -> None:
         """A new state starts untried."""
@@ -343,8 +343,3 @@ def decide(table: FloatArray, index: IntArray, prob: FloatArray, proposed_bin: i
     if kept:
         return limit, worst, proposed_bin, kept
     return limit, worst, choose(total, proposed_bin, limit, safe[worst]), kept
-
-
-def _read_only(view: npt.NDArray[Any]) -> npt.NDArray[Any]:
-    view.flags.writeable = False
-    return view
