@@ -77,6 +77,19 @@ def test_an_untried_bin_takes_its_nearest_tried_bin_on_the_safe_side_or_none() -
     assert model.tried[0].tolist() == [0, 15, 0, 15, 0]
 
 
+def test_a_failure_stays_visible_after_many_safe_tries_of_another_action() -> None:
+    model = LocalRisk(dim=1, n_criteria=1, n_bins=5, horizon=1, max_states=2)
+    model.add_state()
+    z = np.array([0.5])
+    for t in range(5):  # bin 4: one failure in five tries
+        model.learn(f"fast{t}", one_state(), z, 4, 0 if t == 0 else None, ended=True)
+    for t in range(10_000):  # bin 0: always safe
+        model.learn(f"slow{t}", one_state(), z, 0, None, ended=True)
+    risk = np.empty((5, 1))
+    model.read(one_state(), z, SAFE[:1], risk)
+    assert risk[4, 0] == pytest.approx(0.2, abs=0.01) and risk[0, 0] < 1e-3
+
+
 def test_the_risk_follows_the_observation_within_one_state() -> None:
     # one broad state; failures follow only from small x: far from them the risk stays low
     model = LocalRisk(dim=1, n_criteria=1, n_bins=3, horizon=2, max_states=2)
