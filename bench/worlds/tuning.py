@@ -5,7 +5,8 @@ brakes fully, as a DDPG actor stuck at its bound does (the shield has to drive).
 twice: with the project's car-following configuration, and (``_plain``) with the one a new
 user would write, the simulator's ranges scaled linearly (headway over 200 m, no knee),
 which gives the model few, broad states as the held-out worlds' configurations do. Beside
-them the tank (:mod:`bench.worlds.tank`), a world of another make. Defaults are chosen here
+them two worlds of other makes: the tank (:mod:`bench.worlds.tank`) and the lander
+(:mod:`bench.worlds.lander`), whose failure builds up over more steps than the horizon. Defaults are chosen here
 (and on the DDPG protocol's tuning seeds), never on the held-out worlds beside this module.
 
 ``python -m bench.worlds --seeds 0,1 --worlds tuning``
@@ -19,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from app.core import ObservationSpec, ShieldConfig
-from bench.worlds import tank
+from bench.worlds import lander, tank
 from bench.worlds.harness import World
 from client.agents.idm import PRESETS, RandomController
 from client.sim import lead as lead_data
@@ -64,7 +65,7 @@ _CONTROLLERS: dict[str, tuple[str, Any]] = {
     "random": ("random", lambda seed: RandomController(seed).act),
 }
 
-WORLDS: dict[str, World] = {"tuning_tank": tank.WORLD}
+WORLDS: dict[str, World] = {"tuning_tank": tank.WORLD, "tuning_lander": lander.WORLD}
 for _key, (_name, _controller) in _CONTROLLERS.items():
     WORLDS[f"tuning_{_key}"] = _world(f"tuning-{_name}", _controller)
     WORLDS[f"tuning_{_key}_plain"] = _world(f"tuning-{_name}-plain", _controller, PLAIN)
