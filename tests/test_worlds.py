@@ -50,6 +50,16 @@ def test_the_tank_fails_both_ways_alone_and_the_shield_learns_from_it() -> None:
     assert shielded["total"] < alone["total"] and shielded["states"] >= 2
 
 
+def test_the_lander_always_lands_hard_alone_and_the_shield_learns_to_fire_earlier() -> None:
+    # its failure builds up over more steps than the horizon, from a controller that fires
+    # only too late: the shield must try firing harder where the controller never did
+    world = world_named("tuning_lander")
+    alone = run(world, seed=3, episodes=40, warmup=20, config=None)
+    assert alone["failures"] == {"hard_landing": 20}
+    shielded = run(world, seed=3, episodes=40, warmup=20, config=world.config)
+    assert shielded["total"] <= 2
+
+
 def test_an_unknown_world_is_refused_with_the_names_there_are() -> None:
     with pytest.raises(SystemExit, match="tuning_tank"):
         world_named("tuning_nowhere")

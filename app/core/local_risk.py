@@ -24,7 +24,13 @@ revised step is learned for the action applied, never for the proposal.
 that brakes only when it is too late it learns that braking goes with crashing. So a state's
 model answers only for the bins applied in that state; a bin never tried there takes the risk
 of the nearest tried bin on its safe side for that criterion, or none when no bin on its safe
-side was tried: the shield may choose it, and then learns what it does.
+side was tried: the shield may choose it, and then learns what it does. The same holds near
+the observation: each state keeps, per bin, the box of observations where the bin was applied,
+and the bins safer than every bin applied near ``z`` (whose box holds ``z``) carry no risk
+there, whatever was learned of them elsewhere in the state. Where a controller acts only in
+one way at a place, the shield tries the safer ways there; a confound learned at the state's
+other end (firing the engine goes with crashing, because it is fired too late) does not hold
+it back.
 
 **Monotone prior.** Each criterion's direction gives the safe side (braking never raises the
 risk of a collision), so the risks over the action bins are lifted to their running maximum
@@ -67,6 +73,9 @@ class LocalRisk:
         self._theta = np.zeros((0, n_criteria, self.size))
         self._cov = np.zeros((0, self.size, self.size))
         self._tried = np.zeros((0, n_bins), dtype=np.int64)  # steps per state and bin
+        # per state and bin, the box of the observations it was applied at (empty: inf, -inf)
+        self._low = np.zeros((0, n_bins, dim))
+        self._high = np.zeros((0, n_bins, dim))
         self.midpoints = (np.arange(n_bins) + 0.5) / n_bins
         self.pending: dict[str, deque[Step]] = {}  # per stream, the steps awaiting labels
         self.failures = np.zeros(n_criteria, dtype=np.int64)  # learned, per criterion
@@ -85,6 +94,10 @@ class LocalRisk:
         self._theta[n] = 0.0
         self._cov[n] = np.eye(self.size) * PRIOR_COV
         self._tried[n] = 0
+        self._low = ensure_capacity(self._low, n + 1, self.max_states)
+        self._high = ensure_capacity(self._high, n + 1, self.max_states)
+        self._low[n] = np.inf
+        self._high[n] = -np.inf
         self._n = n + 1
 
     def features(self, z: FloatArray, action_bin: int) -> FloatArray:
@@ -100,7 +113,10 @@ class LocalRisk:
         """The stream's previous step (``belief`` and ``z`` before it, ``action_bin`` applied)
         ended in ``failure`` (a criterion index) or not; ``ended`` closes its episode."""
         queue = self.pending.setdefault(stream, deque())
-        self._tried[belief.argmax(), action_bin] += 1
+        home = belief.argmax()
+        self._tried[home, action_bin] += 1
+        np.minimum(self._low[home, action_bin], z, out=self._low[home, action_bin])
+        np.maximum(self._high[home, action_bin], z, out=self._high[home, action_bin])
         # a step's belief arrays are its own and never written after (no copy needed)
         queue.append((belief.index, belief.prob, self.features(z, action_bin)))
         labels = np.zeros(self.n_criteria)
@@ -126,12 +142,14 @@ class LocalRisk:
     def read(self, belief: Belief, z: FloatArray, safe: IntArray, out: FloatArray) -> None:
         """``out`` (bins x criteria): each action's risk at ``z`` under ``belief``, untried
         bins as their nearest tried bin on the safe side (``safe`` per criterion from
-        :func:`app.core.risk.safe_steps`), before the monotone prior."""
-        _read(self._theta, self._tried, belief.index, belief.prob, z, self.midpoints, safe,
-              out)
+        :func:`app.core.risk.safe_steps`), none for the bins safer than every bin applied
+        near ``z``, before the monotone prior."""
+        _read(self._theta, self._tried, self._low, self._high, belief.index, belief.prob, z,
+              self.midpoints, safe, out)
 
     def snapshot(self) -> dict[str, Any]:
-        """Exact state as arrays: the weights, their covariances and the pending steps."""
+        """Exact state as arrays: the weights, their covariances, the bins' boxes and the
+        pending steps."""
         names, lengths, index, prob, phi = [], [], [], [], []
         for name, queue in self.pending.items():
             names.append(name)
@@ -142,13 +160,19 @@ class LocalRisk:
                 phi.append(f)
         sizes = [i.size for i in index]
         return {"theta": self.theta.copy(), "cov": self._cov[: self._n].copy(),
-                "tried": self.tried.copy(),
+                "tried": self.tried.copy(), **self._boxes(),
                 "failures": self.failures.copy(), "streams": names,
                 "lengths": np.array(lengths, dtype=np.int64),
                 "sizes": np.array(sizes, dtype=np.int64),
                 "index": np.concatenate(index) if index else np.zeros(0, dtype=np.int64),
                 "prob": np.concatenate(prob) if prob else np.zeros(0),
                 "phi": np.array(phi).reshape(-1, self.size)}
+
+    def _boxes(self) -> dict[str, FloatArray]:
+        """The boxes, finite: an empty one (never applied) as low 1, high 0."""
+        low, high = self._low[: self._n], self._high[: self._n]
+        empty = low > high
+        return {"low": np.where(empty, 1.0, low), "high": np.where(empty, 0.0, high)}
 
     @classmethod
     def restore(cls, dim: int, n_criteria: int, n_bins: int, horizon: int, max_states: int,
@@ -163,6 +187,16 @@ class LocalRisk:
         tried = stored.ints(data["tried"], "local_risk.tried", (n_states, n_bins), low=0)
         self._theta, self._cov, self._n = theta.copy(), cov.copy(), n_states
         self._tried = tried.copy()
+        self._low = np.full(tried.shape + (dim,), np.inf)
+        self._high = np.full(tried.shape + (dim,), -np.inf)
+        if "low" in data or "high" in data:  # (a snapshot from before them: empty boxes)
+            low = stored.floats(data.get("low"), "local_risk.low", self._low.shape)
+            high = stored.floats(data.get("high"), "local_risk.high", self._low.shape)
+            empty = (low > high).all(axis=-1)
+            if ((low > high).any(axis=-1) & ~empty).any():
+                raise InvalidSnapshot("a box lies above its high end in some dimensions only",
+                                      field="local_risk.low")
+            self._low[~empty], self._high[~empty] = low[~empty], high[~empty]
         self.failures = stored.ints(data["failures"], "local_risk.failures", (n_criteria,)).copy()
         names = data["streams"]
         if not isinstance(names, list) or not all(isinstance(s, str) for s in names):
@@ -216,23 +250,40 @@ def _fit(theta: FloatArray, cov: FloatArray, index: IntArray, prob: FloatArray,
 
 
 @njit(cache=True)
-def _read(theta: FloatArray, tried: IntArray, index: IntArray, prob: FloatArray,
-          z: FloatArray, midpoints: FloatArray, safe: IntArray, out: FloatArray) -> None:
+def _near(low: FloatArray, high: FloatArray, i: int, a: int, z: FloatArray) -> bool:
+    """Whether ``z`` lies in the box where state ``i`` saw bin ``a`` applied."""
+    for r in range(z.shape[0]):
+        if z[r] < low[i, a, r] or z[r] > high[i, a, r]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _read(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
+          index: IntArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
+          safe: IntArray, out: FloatArray) -> None:
     """Each action's risk per criterion under the belief, clipped to [0, 1]: per belief state,
-    its model on the bins tried there, the nearest tried bin on the safe side (or 0) on the
-    others."""
+    none on the bins safer than every bin applied near ``z``, then its model on the bins
+    tried in the state and the nearest tried bin on the safe side (or none) on the others."""
     d, q = z.shape[0], midpoints.shape[0]
     out[:] = 0.0
     for t in range(index.shape[0]):
         i = index[t]
+        supported = False
+        for a in range(q):
+            if _near(low, high, i, a, z):
+                supported = True
+                break
         for c in range(theta.shape[1]):
             base = theta[i, c, 0]
             for r in range(d):
                 base += theta[i, c, r + 1] * z[r]
             first, last, way = (0, q, 1) if safe[c] < 0 else (q - 1, -1, -1)
             carried = 0.0
+            reached = not supported  # past the safest bin applied near z
             for a in range(first, last, way):
-                if tried[i, a] > 0:
+                reached = reached or _near(low, high, i, a, z)
+                if reached and tried[i, a] > 0:
                     value = base + theta[i, c, d + 1] * midpoints[a]
                     carried = min(max(value, 0.0), 1.0)
                 out[a, c] += prob[t] * carried

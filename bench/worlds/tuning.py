@@ -6,8 +6,9 @@ twice: with the project's car-following configuration, and (``_plain``) with the
 user would write, the simulator's ranges scaled linearly (headway over 200 m, no knee),
 which gives the model few, broad states as the held-out worlds' configurations do. Beside
 them two worlds of other makes: the tank (:mod:`bench.worlds.tank`) and the lander
-(:mod:`bench.worlds.lander`), whose failure builds up over more steps than the horizon. Defaults are chosen here
-(and on the DDPG protocol's tuning seeds), never on the held-out worlds beside this module.
+(:mod:`bench.worlds.lander`), whose failure builds up over more steps than the horizon.
+Defaults are chosen here (and on the DDPG protocol's tuning seeds), never on the held-out
+worlds beside this module.
 
 ``python -m bench.worlds --seeds 0,1 --worlds tuning``
 """

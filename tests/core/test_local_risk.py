@@ -77,6 +77,57 @@ def test_an_untried_bin_takes_its_nearest_tried_bin_on_the_safe_side_or_none() -
     assert model.tried[0].tolist() == [0, 15, 0, 15, 0]
 
 
+def test_bins_safer_than_every_bin_applied_near_the_observation_carry_no_risk_there() -> None:
+    # one broad state, a controller that brakes (bin 1) only when it is too late, at small x,
+    # and cruises (bin 3) at large x: braking is learned with crashing (the confound)
+    model = LocalRisk(dim=1, n_criteria=1, n_bins=5, horizon=1, max_states=2)
+    model.add_state()
+    rng = np.random.default_rng(2)
+    for t in range(200):
+        brake = t % 2 == 0
+        x = rng.uniform(0.0, 0.3) if brake else rng.uniform(0.6, 1.0)
+        model.learn(str(t), one_state(), np.array([x]), 1 if brake else 3, 0 if brake else None,
+                    ended=True)
+
+    def model_at(x: float, b: int) -> float:
+        return float(np.clip(model.theta[0, 0] @ model.features(np.array([x]), b), 0, 1))
+
+    far, near = np.empty((5, 1)), np.empty((5, 1))
+    model.read(one_state(), np.array([0.8]), SAFE[:1], far)
+    model.read(one_state(), np.array([0.1]), SAFE[:1], near)
+    assert model_at(0.8, 1) > 0.1  # what the state-wide model says of braking at x = 0.8
+    # at x = 0.8 only bin 3 was applied: braking there is untried, so it carries no risk
+    assert far[:, 0].tolist() == pytest.approx([0.0, 0.0, 0.0, model_at(0.8, 3),
+                                                model_at(0.8, 3)])
+    # at x = 0.1 braking was applied: its model answers, and the state's for bin 3
+    assert near[:, 0].tolist() == pytest.approx([0.0, model_at(0.1, 1), model_at(0.1, 1),
+                                                 model_at(0.1, 3), model_at(0.1, 3)])
+    assert near[1, 0] > 0.5
+
+
+def test_a_snapshot_without_boxes_restores_with_none_and_a_bad_box_is_refused() -> None:
+    shield = Shield(ShieldConfig.from_dict(LOCAL))
+    crash_world(shield, 10, seed=6)
+    data = shield.snapshot()
+    local = data["local_risk"]
+    assert shield.local_risk is not None
+    assert_same(Shield.from_snapshot(data).snapshot()["local_risk"], local)
+    older = {k: v for k, v in local.items() if k not in ("low", "high")}
+    restored = Shield.from_snapshot({**data, "local_risk": older}).local_risk
+    assert restored is not None
+    boxes = restored.snapshot()
+    assert (boxes["low"] == 1.0).all() and (boxes["high"] == 0.0).all()  # all empty
+    assert_same(restored.theta, shield.local_risk.theta)
+    assert_same(Shield.from_snapshot(Shield.from_snapshot(
+        {**data, "local_risk": older}).snapshot()).snapshot()["local_risk"], boxes)
+    half = local["low"].copy()
+    applied = local["tried"] > 0
+    half[applied, 0] = local["high"][applied, 0] + 1.0  # one dimension upside down
+    with pytest.raises(InvalidSnapshot) as error:
+        Shield.from_snapshot({**data, "local_risk": {**local, "low": half}})
+    assert error.value.field == "local_risk.low"
+
+
 def test_a_failure_stays_visible_after_many_safe_tries_of_another_action() -> None:
     model = LocalRisk(dim=1, n_criteria=1, n_bins=5, horizon=1, max_states=2)
     model.add_state()
