@@ -79,6 +79,7 @@ class LocalRisk:
         self.midpoints = (np.arange(n_bins) + 0.5) / n_bins
         self.pending: dict[str, deque[Step]] = {}  # per stream, the steps awaiting labels
         self.failures = np.zeros(n_criteria, dtype=np.int64)  # learned, per criterion
+        self.any_failure = False  # (read every step: cheaper than asking the array)
 
     @property
     def theta(self) -> FloatArray:
@@ -123,6 +124,7 @@ class LocalRisk:
         if failure is not None:
             labels[failure] = 1.0
             self.failures[failure] += 1
+            self.any_failure = True
         if failure is not None or ended:
             for step in queue:
                 _fit(self._theta, self._cov, *step, labels)
@@ -198,6 +200,7 @@ class LocalRisk:
                                       field="local_risk.low")
             self._low[~empty], self._high[~empty] = low[~empty], high[~empty]
         self.failures = stored.ints(data["failures"], "local_risk.failures", (n_criteria,)).copy()
+        self.any_failure = bool(self.failures.any())
         names = data["streams"]
         if not isinstance(names, list) or not all(isinstance(s, str) for s in names):
             raise InvalidSnapshot("pending streams must be names", field="local_risk.streams")

@@ -608,7 +608,7 @@ class Shield:
         candidates: Sequence[Candidate] = ()
         revised = False
         local = self.local_risk
-        if not (self.outcomes.any_failure if local is None else local.failures.any()):
+        if not (self.outcomes.any_failure if local is None else local.any_failure):
             risks, limit, verdict, reason = self._risk(None), None, "ok", "cold_start"
         else:
             start = actions.encode(proposed, cfg.action)
