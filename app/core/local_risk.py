@@ -196,7 +196,8 @@ class LocalRisk:
             high = stored.floats(data.get("high"), "local_risk.high", self._low.shape)
             empty = (low > high).all(axis=-1)
             if ((low > high).any(axis=-1) & ~empty).any():
-                raise InvalidSnapshot("a box lies above its high end in some dimensions only",
+                raise InvalidSnapshot("a box whose low end lies above its high end in some "
+                                      "dimensions only (empty boxes: in all)",
                                       field="local_risk.low")
             self._low[~empty], self._high[~empty] = low[~empty], high[~empty]
         self.failures = stored.ints(data["failures"], "local_risk.failures", (n_criteria,)).copy()
