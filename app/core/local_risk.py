@@ -273,21 +273,20 @@ def _read(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
     out[:] = 0.0
     for t in range(index.shape[0]):
         i = index[t]
-        supported = False
+        lowest, highest = q, -1  # the bins applied near z, from each end (none: q, -1)
         for a in range(q):
             if _near(low, high, i, a, z):
-                supported = True
-                break
+                lowest, highest = min(lowest, a), a
         for c in range(theta.shape[1]):
             base = theta[i, c, 0]
             for r in range(d):
                 base += theta[i, c, r + 1] * z[r]
             first, last, way = (0, q, 1) if safe[c] < 0 else (q - 1, -1, -1)
+            # the safest bin applied near z: before it, nothing counts (none applied: all do)
+            safest = first if highest < 0 else (lowest if safe[c] < 0 else highest)
             carried = 0.0
-            reached = not supported  # past the safest bin applied near z
             for a in range(first, last, way):
-                reached = reached or _near(low, high, i, a, z)
-                if reached and tried[i, a] > 0:
+                if (a - safest) * way >= 0 and tried[i, a] > 0:
                     value = base + theta[i, c, d + 1] * midpoints[a]
                     carried = min(max(value, 0.0), 1.0)
                 out[a, c] += prob[t] * carried
