@@ -1,11 +1,10 @@
 """Cost of one step of the default shield (the risk reviser) as the model grows.
 
 For each size n a model is built through the core's own API (n states spread over the
-normalised observation cube, 20 learned transitions and 40 counted outcomes per state along a
-random walk, one in 200 a failure, the risk table refreshed), then it runs the step the
-service runs for every request: validate, normalise, cluster, recognise, learn the transition
-and the outcome, read the risk of every action and decide. The risk table's refresh (at
-episode ends and every ``refresh_steps``) is left out here: ``bench/risk_refresh.py`` times it.
+normalised observation cube, 20 learned transitions and 40 labelled steps of the local risk
+model per state along a random walk, one in 200 a failure), then it runs the step the service
+runs for every request: validate, normalise, cluster, recognise, learn the transition and the
+step's risk label, read the risk of every action and decide.
 
 Two workloads: ``keep``, a smooth controller whose proposals the shield mostly keeps, and
 ``revise``, the strongest acceleration every step, which the shield replaces where braking is
@@ -16,7 +15,6 @@ model's in the same run.
 
     python bench/step_cost.py                        # 10, 1000 and 5000 states
     python bench/step_cost.py --sizes 10 1000 --rounds 3 --steps 2000
-    python bench/step_cost.py --model local          # the local risk model (risk.model)
 """
 
 from __future__ import annotations
@@ -35,20 +33,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.core import LimitsConfig, ReviserConfig, Shield, ShieldConfig  # noqa: E402
 from app.core.belief import recognise  # noqa: E402
-from app.core.config import RiskConfig  # noqa: E402
 from bench.core_step import spread  # noqa: E402
 
 SEED = 0
 CRITERIA = ("collision", "large_distance")
 
 
-def build(n: int, seed: int = SEED, model: str = "counts") -> Shield:
-    """A default shield of n states (the risk ``model`` given) with a learned history, the
-    reviser active."""
+def build(n: int, seed: int = SEED) -> Shield:
+    """A default shield of n states with a learned history, the reviser active."""
     config = ShieldConfig(
         reviser=ReviserConfig(seed=seed, activate_after_episodes=0),
-        risk=RiskConfig(model=model, horizon=24 if model == "local" else 8,  # type: ignore[arg-type]
-                        refresh_steps=10**9),
         limits=LimitsConfig(max_states=n),
     )
     rng = np.random.default_rng(seed)
@@ -64,14 +58,9 @@ def build(n: int, seed: int = SEED, model: str = "counts") -> Shield:
         if t % 2 == 0:
             shield.transitions.learn_one(prev, action, belief)
         failure = int(rng.integers(2)) if rng.random() < 0.005 else None
-        if failure is not None:
-            shield.outcomes.learn_failure(prev.argmax(), action, failure)
-        else:
-            shield.outcomes.learn_move(prev.argmax(), action, belief.argmax())
-        if shield.local_risk is not None:
-            shield.local_risk.learn("history", prev, before, action, failure, ended=False)
+        assert shield.local_risk is not None
+        shield.local_risk.learn("history", prev, before, action, failure, ended=False)
         prev = belief
-    shield._refresh_risk()
     return shield
 
 
@@ -102,11 +91,10 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[10, 1000, 5000])
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=5000)
-    parser.add_argument("--model", choices=["counts", "local"], default="counts")
     args = parser.parse_args()
     rows: list[dict[str, Any]] = []
     for n in args.sizes:
-        shield = build(n, model=args.model)
+        shield = build(n)
         time_steps(shield, steps(200, SEED + 99, "keep"))  # compiled and warm
         row: dict[str, Any] = {"states": n}
         for workload in ("keep", "revise"):
@@ -116,7 +104,7 @@ def main() -> None:
                 times.append(t)
             row[workload] = (statistics.median(times) * 1e6, share)
         rows.append(row)
-    print(f"risk model {args.model}; seed {SEED}; {args.rounds} rounds of {args.steps} steps; "
+    print(f"seed {SEED}; {args.rounds} rounds of {args.steps} steps; "
           f"median of round means; {platform.machine()}, numpy {np.__version__}, "
           f"Python {platform.python_version()}\n")
     print("| states | keep: step (us) | x smallest | revised | revise: step (us) | x smallest "

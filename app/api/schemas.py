@@ -133,8 +133,8 @@ class ModelCreate(BaseModel):
         "across_episodes, on_replace), reviser (activate_after_episodes, noise_k, noise, "
         "horizon, transpose, inspect, search, multi_step, flags, flag_min_rate, one_sided, "
         "seed, method: risk or paper), "
-        "risk (model, horizon, threshold, margin, prior_safe, refresh_steps), "
-        "limits (max_states, max_streams, belief_top_k, tpm_backend, outcome_log).",
+        "risk (horizon, threshold, margin), "
+        "limits (max_states, max_streams, belief_top_k, tpm_backend).",
         examples=[{"clustering": {"epsilon": 0.1}, "reviser": {"seed": 7}}],
     )
 

@@ -107,14 +107,6 @@ class EvolvingClusterer:
         _sq_distances(self._centres, self._sq_norms, self._n, z, _dot(z, z), out)
         return out
 
-    def most_likely(self, points: FloatArray) -> npt.NDArray[np.int64]:
-        """Per row of ``points`` (normalised), the state Eq. 1 finds most likely now: the
-        least ``d_i^2 / var_i``, the lower index of equals (as a step's recognition)."""
-        out = np.empty(points.shape[0], dtype=np.int64)
-        _most_likely(np.ascontiguousarray(points), self._centres, self._sq_norms,
-                     self._variances, self._n, out)
-        return out
-
     def learn_one(self, z: FloatArray) -> StateUpdate:
         """Cluster one normalised observation; may create or move one state."""
         return self.learn_and_recognise(z, 1)[0]
@@ -211,23 +203,6 @@ def _dot(x: FloatArray, y: FloatArray) -> float:
     for i in range(x.shape[0]):
         total += x[i] * y[i]
     return total
-
-
-@njit(cache=True, nogil=True, error_model="numpy")  # variances are positive
-def _most_likely(points: FloatArray, centres: FloatArray, sq_norms: FloatArray,
-                 variances: FloatArray, n: int, out: npt.NDArray[np.int64]) -> None:
-    """:meth:`EvolvingClusterer.most_likely` into ``out``. Without the GIL: recounting a
-    large model's log takes seconds, and the threads of other models go on meanwhile."""
-    d2 = np.empty(n)
-    for row in range(points.shape[0]):
-        z = points[row]
-        _sq_distances(centres, sq_norms, n, z, _dot(z, z), d2)
-        best, least = 0, math.inf
-        for i in range(n):
-            scaled = d2[i] / variances[i]
-            if scaled < least:
-                best, least = i, scaled
-        out[row] = best
 
 
 @njit(cache=True)

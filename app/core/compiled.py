@@ -18,11 +18,12 @@ from types import ModuleType
 import numpy as np
 from numba.core.registry import CPUDispatcher
 
-from app.core import _kernels, belief, clustering, lazy_tpm, observation, risk
+from app.core import _kernels, belief, clustering, lazy_tpm, local_risk, observation, risk
 from app.core.config import ShieldConfig
 from app.core.shield import Shield
 
-MODULES: tuple[ModuleType, ...] = (_kernels, observation, clustering, belief, lazy_tpm, risk)
+MODULES: tuple[ModuleType, ...] = (_kernels, observation, clustering, belief, lazy_tpm,
+                                   local_risk, risk)
 
 
 @dataclass(frozen=True)
@@ -82,5 +83,4 @@ def _drive(shield: Shield) -> Shield:
             shield.step(z, action, learn=False)
         event = names[episode] if episode < len(names) else None
         shield.step(z, None, event=event, done=True)
-    shield.clusterer.most_likely(np.zeros((1, shield.space.size)))  # what a recount runs
     return shield

@@ -210,9 +210,9 @@ class ReviserConfig:
     predicted states (Algs. 1-3, with every switch below; :meth:`ShieldConfig.paper`). Either
     revises only after ``activate_after_episodes`` episodes, learning from the controller's
     own actions until then: from the first episode by default (the risk reviser reads a risk
-    only where failures were counted, and its counts follow the states as they evolve;
-    docs/risk-reviser.md), after the paper's xi = 50 in :meth:`ShieldConfig.paper` and
-    :meth:`ShieldConfig.paper_literal`. ``seed`` drives the paper reviser's noise.
+    only once a failure was learned; docs/risk-reviser.md), after the paper's xi = 50 in
+    :meth:`ShieldConfig.paper` and :meth:`ShieldConfig.paper_literal`. ``seed`` drives the
+    paper reviser's noise.
     """
 
     method: Literal["paper", "risk"] = "risk"
@@ -244,35 +244,23 @@ class ReviserConfig:
 
 @dataclass(frozen=True)
 class RiskConfig:
-    """The failure-aware reviser (:mod:`app.core.risk`).
+    """The failure-aware reviser (:mod:`app.core.local_risk`, :mod:`app.core.risk`).
 
     An action is kept when its risk (the probability, summed over criteria, of a failure
-    within ``horizon`` steps) is at most ``threshold`` or within ``margin`` of the safest
-    action's; otherwise the nearest allowed action replaces it. The defaults act on any
-    measurable difference (docs/risk-reviser.md). ``model`` says how the risk is estimated:
-    ``local`` (the default), a linear model per state in the observation and the action of
-    what followed each step (:mod:`app.core.local_risk`); ``counts``, per (state, action)
-    outcome counts and value iteration under the safest known continuation
-    (:mod:`app.core.risk`, the default before, with a horizon of 8). For ``counts``,
-    ``prior_safe`` is the number of safe pseudo-tries every (state, action) starts with, and
-    the risk table is rebuilt at every episode end and after ``refresh_steps`` steps.
+    within ``horizon`` steps, from a linear model per state in the observation and the action)
+    is at most ``threshold`` or within ``margin`` of the safest action's; otherwise the nearest
+    allowed action replaces it. The defaults act on any measurable difference
+    (docs/risk-reviser.md).
     """
 
-    model: Literal["local", "counts"] = "local"
     horizon: int = 24
     threshold: float = 0.0
     margin: float = 0.001
-    prior_safe: float = 1.0
-    refresh_steps: int = 500
 
     def __post_init__(self) -> None:
-        _check(self.model in ("local", "counts"), "model", "model is 'local' or 'counts'")
         _check(1 <= self.horizon <= 256, "horizon", "horizon lies in [1, 256]")
         _check(0.0 <= self.threshold <= 1.0, "threshold", "threshold lies in [0, 1]")
         _check(0.0 <= self.margin <= 1.0, "margin", "margin lies in [0, 1]")
-        _check(math.isfinite(self.prior_safe) and self.prior_safe > 0, "prior_safe",
-               "must be positive")
-        _check(1 <= self.refresh_steps <= 10**9, "refresh_steps", "lies in [1, 1e9]")
 
 
 @dataclass(frozen=True)
@@ -284,23 +272,18 @@ class LimitsConfig:
     beyond ``max_streams`` makes the model forget the least recently used stream's previous
     step (counted as ``streams_expired``), so that stream names cannot exhaust memory.
     ``belief_top_k`` truncates beliefs and propagated predictions to their k most likely
-    states (exact when k >= the number of states). ``outcome_log`` bounds the transitions the
-    risk reviser keeps to count again as the states evolve (:mod:`app.core.outcome_log`;
-    about 64 bytes each with three observed dimensions); older ones stay counted where the
-    last recount put them, and 0 keeps none.
+    states (exact when k >= the number of states).
     """
 
     max_states: int = 10_000
     max_streams: int = 10_000
     belief_top_k: int = 16
     tpm_backend: Literal["lazy", "dense"] = "lazy"
-    outcome_log: int = 200_000
 
     def __post_init__(self) -> None:
         _check(1 <= self.max_states <= 1_000_000, "max_states", "lies in [1, 1000000]")
         _check(1 <= self.max_streams <= 1_000_000, "max_streams", "lies in [1, 1000000]")
         _check(self.belief_top_k >= 1, "belief_top_k", "must be >= 1")
-        _check(0 <= self.outcome_log <= 2_000_000, "outcome_log", "lies in [0, 2000000]")
 
 
 @dataclass(frozen=True)
@@ -379,20 +362,22 @@ class ShieldConfig:
         that used a switch since removed is refused (:class:`InvalidConfig` names the field)."""
         if not isinstance(data, Mapping):
             raise InvalidConfig("expected an object")
-        if data.get("version", 1) == 1:
+        version = data.get("version", 1)
+        if version == 1:
             data = _from_version_1(data)
+        if version in (1, 2):
+            data = _from_version_2(data)
         return cls.from_dict(data)
 
 
-CONFIG_VERSION = 2
+CONFIG_VERSION = 3
 
 
 def _from_version_1(data: Mapping[str, Any]) -> dict[str, Any]:
     """Version 1 (no ``version`` field) to 2. A field that version 1 lacked takes the value it
     was added with, where the default has changed since; the switches removed in version 2 lost
     their trials (docs/research-log.md) and must hold the value whose behaviour remains."""
-    out = {key: dict(value) if isinstance(value, Mapping) else value
-           for key, value in data.items()}
+    out = _copy(data)
     sections = {name: part for name, part in out.items() if isinstance(part, dict)}
     observation = sections.get("observation", {})
     reviser = sections.get("reviser", {})
@@ -411,14 +396,46 @@ def _from_version_1(data: Mapping[str, Any]) -> dict[str, Any]:
         ("risk", "precursor_steps", 0, 0, True),
         ("risk", "precursor_spacing", None, None, False),
     )
+    _remove(sections, removed, 2)
+    out["version"] = 2
+    return out
+
+
+def _from_version_2(data: Mapping[str, Any]) -> dict[str, Any]:
+    """Version 2 to 3: the counted risk model (per state and action outcome counts and value
+    iteration) lost to the local one everywhere (docs/risk-reviser.md) and was removed with
+    its settings. A risk reviser that used it (``risk.model`` missing means it: it came first)
+    cannot be reproduced; its settings mean nothing to any other configuration."""
+    out = _copy(data)
+    sections = {name: part for name, part in out.items() if isinstance(part, dict)}
+    risk_reviser = sections.get("reviser", {}).get("method") == "risk"
+    removed = (
+        ("risk", "model", "counts", "local", risk_reviser),
+        ("risk", "prior_safe", 1.0, 1.0, False),
+        ("risk", "refresh_steps", 500, 500, False),
+        ("limits", "outcome_log", 0, 0, False),
+    )
+    _remove(sections, removed, 3)
+    out["version"] = CONFIG_VERSION
+    return out
+
+
+def _copy(data: Mapping[str, Any]) -> dict[str, Any]:
+    return {key: dict(value) if isinstance(value, Mapping) else value
+            for key, value in data.items()}
+
+
+def _remove(sections: dict[str, dict[str, Any]],
+            removed: tuple[tuple[str, str, Any, Any, bool], ...], version: int) -> None:
+    """Drop removed fields; one whose value (or its value when missing) is not the behaviour
+    that remains, where that matters, is refused."""
     for section, name, missing, remains, counts in removed:
         part = sections.get(section, {})
         value = part.pop(name, missing)
         if counts and value != remains:
             raise InvalidConfig(f"{section}.{name} = {value!r} was removed in configuration "
-                                f"version {CONFIG_VERSION}; this version cannot reproduce it",
+                                f"version {version}; this version cannot reproduce it",
                                 field=f"{section}.{name}")
-    return out
 
 
 def _lists(value: Any) -> Any:

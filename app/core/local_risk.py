@@ -1,4 +1,4 @@
-"""Risk per action, local in the observation: the risk reviser's model (``risk.model: local``).
+"""Risk per action, local in the observation: the risk reviser's model (``reviser.method: risk``).
 
 For each state i and criterion c a linear model ``theta_ic . phi(z, u)`` of the probability that
 a failure of c follows within ``horizon`` steps, where ``phi = [1, z, u]``: the observation in
@@ -34,7 +34,7 @@ it back.
 
 **Monotone prior.** Each criterion's direction gives the safe side (braking never raises the
 risk of a collision), so the risks over the action bins are lifted to their running maximum
-from the safe end (:func:`app.core.risk.monotone`), as for the counted model.
+from the safe end (:func:`app.core.risk.monotone`).
 """
 
 from __future__ import annotations
@@ -47,6 +47,7 @@ import numpy.typing as npt
 from numba import njit
 
 from app.core import _stored as stored
+from app.core import risk
 from app.core._arrays import ensure_capacity, read_only
 from app.core.belief import Belief
 from app.core.errors import InvalidSnapshot
@@ -148,6 +149,16 @@ class LocalRisk:
         near ``z``, before the monotone prior."""
         _read(self._theta, self._tried, self._low, self._high, belief.index, belief.prob, z,
               self.midpoints, safe, out)
+
+    def decide(self, belief: Belief, z: FloatArray, proposed_bin: int, threshold: float,
+               margin: float, safe: IntArray, by_bin: FloatArray, verdicts: IntArray
+               ) -> tuple[float, int, int, bool]:
+        """The risk reviser's decision on a proposal at ``z`` (:func:`app.core.risk.decide`):
+        ``by_bin`` gets each action's risk (:meth:`read`, then the monotone prior) and
+        ``verdicts`` each bin's verdict; one compiled call."""
+        return _decide(self._theta, self._tried, self._low, self._high, belief.index,
+                       belief.prob, z, self.midpoints, safe, proposed_bin, threshold, margin,
+                       by_bin, verdicts)
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state as arrays: the weights, their covariances, the bins' boxes and the
@@ -290,3 +301,14 @@ def _read(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
                     value = base + theta[i, c, d + 1] * midpoints[a]
                     carried = min(max(value, 0.0), 1.0)
                 out[a, c] += prob[t] * carried
+
+
+@njit(cache=True)
+def _decide(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
+            index: IntArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
+            safe: IntArray, proposed_bin: int, threshold: float, margin: float,
+            by_bin: FloatArray, verdicts: IntArray) -> tuple[float, int, int, bool]:
+    """:meth:`LocalRisk.decide`: :func:`_read`, the monotone prior and the decision."""
+    _read(theta, tried, low, high, index, prob, z, midpoints, safe, by_bin)
+    risk.monotone(by_bin, safe)
+    return risk.decide(by_bin, proposed_bin, threshold, margin, safe, verdicts)

@@ -19,7 +19,6 @@ import numpy.typing as npt
 
 from app.core import _stored as stored
 from app.core import actions, reviser, risk
-from app.core._arrays import ensure_capacity
 from app.core.belief import Belief, recognise
 from app.core.clustering import EvolvingClusterer
 from app.core.config import ActionSpec, ShieldConfig
@@ -36,15 +35,13 @@ from app.core.lazy_tpm import LazyTransitions
 from app.core.local_risk import LocalRisk
 from app.core.observation import ObservationSpace
 from app.core.observation import check as check_observation
-from app.core.outcome_log import OutcomeLog
 from app.core.tpm import DenseTransitions, TransitionModel
 
 FloatArray = npt.NDArray[np.float64]
-SNAPSHOT_FORMAT = 3
+SNAPSHOT_FORMAT = 4
 # Observations beyond this magnitude are refused: their squares (distances, potentials) would
 # overflow float64 long before they could mean anything physical.
 MAX_MAGNITUDE = 1e12
-ONE_STATE, ONE = np.zeros(1, dtype=np.int64), np.ones(1)  # a belief of one row
 
 
 @dataclass(slots=True)
@@ -218,25 +215,14 @@ class Shield:
         self.transitions: TransitionModel = self._new_transitions()
         self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria),
                                 cfg.reviser.flag_min_rate)
-        self.outcomes = risk.OutcomeCounts(cfg.action.n_bins, len(cfg.criteria),
-                                           cfg.limits.max_states)
-        self.outcome_log = self._new_outcome_log()
         self.local_risk = self._new_local_risk()
-        self._risk_table = np.zeros((0, cfg.action.n_bins, len(cfg.criteria)))
-        self._risk_version = 0  # the outcome counts' version the table was built from
         self.streams: dict[str, StreamState] = {}
         self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria})
         self._rng = np.random.default_rng(cfg.reviser.seed)
 
-    def _new_outcome_log(self) -> OutcomeLog:
-        cfg = self.config
-        return OutcomeLog(self.space.size, cfg.action.n_bins, len(cfg.criteria),
-                          cfg.limits.max_states,
-                          cfg.limits.outcome_log if cfg.reviser.method == "risk" else 0)
-
     def _new_local_risk(self) -> LocalRisk | None:
         cfg = self.config
-        if cfg.reviser.method != "risk" or cfg.risk.model != "local":
+        if cfg.reviser.method != "risk":
             return None
         return LocalRisk(self.space.size, len(cfg.criteria), cfg.action.n_bins,
                          cfg.risk.horizon, cfg.limits.max_states)
@@ -376,14 +362,13 @@ class Shield:
         self._learn_transition(state, belief, update.is_new, step.applied_action)
         # flags on the recognised state
         recognised = belief.argmax()
-        self._learn_outcome(state, z, recognised, step)
+        self._learn_outcome(state, step)
         self.flags.observe(recognised, step.event, state.recognised != recognised)
         self.counters.steps += 1
         self.counters.model_version += 1
 
         if step.done:
             self.counters.episodes += 1
-            self._refresh_risk()
             closing = self._closing(step, recognised, update.is_new, state.step)
             if cfg.transitions.across_episodes:  # A13 literal: the next reset is learned
                 state.belief, state.recognised, state.step, state.z = belief, recognised, 0, z
@@ -391,8 +376,6 @@ class Shield:
                 del self.streams[step.stream]
             return closing
 
-        if self.outcomes.version - self._risk_version >= cfg.risk.refresh_steps:
-            self._refresh_risk()
         decision = self._decide(step, z, belief, recognised, update.is_new, state.step,
                                 self._rng)
         assert decision.action is not None and step.action is not None
@@ -424,58 +407,20 @@ class Shield:
         """A state was created: every per-state table grows by one."""
         self.transitions.add_state()
         self.flags.add_state()
-        self.outcomes.add_state()
-        self.outcome_log.add_state()
         if self.local_risk is not None:
             self.local_risk.add_state()
-        n = self.n_states
-        self._risk_table = ensure_capacity(self._risk_table, n, self.config.limits.max_states)
 
-    def _learn_outcome(self, state: StreamState, z: FloatArray, recognised: int,
-                       step: StepInput) -> None:
-        """Count what the stream's previous action led to: the recognised state, or the
-        failure of this step's event (an absorbing outcome), and log it to count again later
-        (:mod:`app.core.outcome_log`); with the local risk model, queue the step for its label
-        instead (:mod:`app.core.local_risk`). Only the risk reviser reads them, so the paper's
-        counts nothing here."""
-        if state.belief is None or self.config.reviser.method != "risk":
-            return
+    def _learn_outcome(self, state: StreamState, step: StepInput) -> None:
+        """Queue the stream's previous step, under the action applied, for its label: the
+        failure of this step's event, if any, or none once ``horizon`` steps pass safely
+        (:mod:`app.core.local_risk`). Only the risk reviser reads it, so the paper's learns
+        nothing here."""
+        if state.belief is None or state.z is None or self.local_risk is None:
+            return  # (a stream restored from a snapshot of the paper's reviser lacks z)
         action_bin = (state.applied_bin if step.applied_action is None
                       else actions.encode(step.applied_action, self.config.action))
-        previous, event = state.recognised, step.event
-        if self.local_risk is not None:
-            if state.z is not None:  # (a stream restored from an old snapshot lacks it)
-                self.local_risk.learn(step.stream, state.belief, state.z, action_bin, event,
-                                      step.done)
-            return
-        log = self.outcome_log
-        if log.full:
-            self._recount()
-        self.outcomes.learn(previous, action_bin, recognised, event)
-        if log.capacity == 0:
-            return
-        if state.z is None:  # a stream restored from a snapshot that did not keep it:
-            log.base.learn(previous, action_bin, recognised, event)  # counted where it is
-        else:
-            log.append(state.z, action_bin, z if event is None else None, event)
-
-    def _recount(self) -> None:
-        """Count the logged transitions again under the states as they are now."""
-        self.outcomes = self.outcome_log.recount(self.clusterer.most_likely,
-                                                 self.outcomes.version)
-
-    def _refresh_risk(self) -> None:
-        """Rebuild the risk table from the outcome counts (:func:`risk.horizon_risk`)."""
-        cfg = self.config
-        n = self.n_states
-        if cfg.reviser.method != "risk" or n == 0 or self.local_risk is not None:
-            return
-        if self.outcome_log.due:
-            self._recount()
-        self._risk_table[:n] = risk.horizon_risk(
-            self.outcomes.tries, self.outcomes.failures, self.outcomes.moves(),
-            self._directions, cfg.risk.horizon, cfg.risk.prior_safe)
-        self._risk_version = self.outcomes.version
+        self.local_risk.learn(step.stream, state.belief, state.z, action_bin, step.event,
+                              step.done)
 
     def _learn_transition(
         self, state: StreamState, belief: Belief, is_new: bool, applied: float | None
@@ -597,9 +542,10 @@ class Shield:
     def _decide_by_risk(self, step: StepInput, z: FloatArray, belief: Belief,
                         recognised: int, is_new: bool, index: int, rng: np.random.Generator
                         ) -> Decision:
-        """The risk reviser (:mod:`app.core.risk`): keep the proposal unless its risk is over
-        the threshold and beyond the margin of the safest action; then the nearest allowed
-        (at its midpoint: no noise, so ``rng`` is not drawn from)."""
+        """The risk reviser (:mod:`app.core.local_risk`, :mod:`app.core.risk`): keep the
+        proposal unless its risk is over the threshold and beyond the margin of the safest
+        action; then the nearest allowed (at its midpoint: no noise, so ``rng`` is not drawn
+        from)."""
         cfg = self.config
         proposed = step.action
         assert proposed is not None
@@ -608,20 +554,16 @@ class Shield:
         candidates: Sequence[Candidate] = ()
         revised = False
         local = self.local_risk
-        if not (self.outcomes.any_failure if local is None else local.any_failure):
+        assert local is not None
+        if not local.any_failure:
             risks, limit, verdict, reason = self._risk(None), None, "ok", "cold_start"
         else:
             start = actions.encode(proposed, cfg.action)
             by_bin = np.empty((cfg.action.n_bins, len(names)))
             verdicts = np.empty(cfg.action.n_bins, dtype=np.int64)
-            table, index_, prob = self._risk_table, belief.index, belief.prob
-            if local is not None:  # this observation's own row, under the monotone prior
-                local.read(belief, z, self._safe_steps, by_bin)
-                table, index_, prob = np.empty((1,) + by_bin.shape), ONE_STATE, ONE
-                risk.monotone(by_bin[None], self._safe_steps, table)
-            limit, worst, final, kept = risk.decide(
-                table, index_, prob, start, cfg.risk.threshold, cfg.risk.margin,
-                self._safe_steps, by_bin, verdicts)
+            limit, worst, final, kept = local.decide(
+                belief, z, start, cfg.risk.threshold, cfg.risk.margin, self._safe_steps,
+                by_bin, verdicts)
             risks = dict(zip(names, by_bin[start].tolist(), strict=True))
             verdict = "ok" if kept else names[worst]
             if self.counters.episodes < cfg.reviser.activate_after_episodes:
@@ -706,10 +648,6 @@ class Shield:
             "clustering": self.clusterer.snapshot(),
             "transitions": self.transitions.snapshot(),
             "flags": self.flags.snapshot(),
-            "outcomes": self.outcomes.snapshot(),
-            "outcome_log": self.outcome_log.snapshot(),
-            "risk": {"table": self._risk_table[: self.n_states].copy(),
-                     "version": self._risk_version},
             "local_risk": None if self.local_risk is None else self.local_risk.snapshot(),
             "streams": {
                 name: {
@@ -727,7 +665,7 @@ class Shield:
     @classmethod
     def from_snapshot(cls, data: dict[str, Any]) -> Shield:
         """Rebuild a shield that makes exactly the decisions the original would make."""
-        if not isinstance(data, dict) or data.get("format") not in (2, SNAPSHOT_FORMAT):
+        if not isinstance(data, dict) or data.get("format") not in (2, 3, SNAPSHOT_FORMAT):
             raise InvalidSnapshot(f"expected snapshot format {SNAPSHOT_FORMAT}", field="format")
         try:
             return cls._restore(data)
@@ -807,50 +745,10 @@ class Shield:
                            else stored.floats(data["z"], f"{field}.z", (self.space.size,)))
 
     def _restore_risk(self, data: dict[str, Any], n: int) -> None:
-        """The outcome counts and the risk table; a format-2 snapshot (from before the risk
-        reviser) has neither and starts them empty."""
-        cfg = self.config
-        q, n_c = cfg.action.n_bins, len(cfg.criteria)
-        if data["format"] == 2:
-            for _ in range(n):
-                self.outcomes.add_state()
-                self.outcome_log.add_state()
-            self._risk_table = np.zeros((n, q, n_c))
-            return
-        self.outcomes = risk.OutcomeCounts.restore(q, n_c, cfg.limits.max_states,
-                                                   data["outcomes"])
-        if self.outcomes.n_states != n:
-            raise InvalidSnapshot("outcomes and states disagree on the state count",
-                                  field="outcomes.tries")
-        self._restore_outcome_log(data.get("outcome_log"), n)
-        self._risk_table = stored.floats(data["risk"]["table"], "risk.table", (n, q, n_c),
-                                         low=0.0, high=1.0)
-        self._risk_version = stored.integer(data["risk"]["version"], "risk.version")
-        local = data.get("local_risk")
-        if self.local_risk is not None and local is not None:
+        """The risk reviser's local model (a snapshot of format 3 also holds the counts of the
+        model removed since, which this version does not read)."""
+        if self.local_risk is not None:
+            cfg = self.config
             self.local_risk = LocalRisk.restore(
-                self.space.size, n_c, q, cfg.risk.horizon, cfg.limits.max_states, n, local)
-        elif self.local_risk is not None:  # a snapshot from before the local model
-            for _ in range(n):
-                self.local_risk.add_state()
-
-    def _restore_outcome_log(self, data: dict[str, Any] | None, n: int) -> None:
-        """The log and its base, which together make up the counts; a snapshot from before
-        the log keeps every count so far in the base, where it stays."""
-        cfg = self.config
-        q, n_c, limit = cfg.action.n_bins, len(cfg.criteria), cfg.limits.max_states
-        log = self.outcome_log
-        if data is None:
-            log.base = risk.OutcomeCounts.restore(q, n_c, limit, self.outcomes.snapshot())
-            return
-        log = OutcomeLog.restore(log.dim, q, n_c, limit, log.capacity, data, "outcome_log")
-        if log.base.n_states != n:
-            raise InvalidSnapshot("the outcome log and the states disagree on the state count",
-                                  field="outcome_log.base")
-        if log.capacity and (log.base.tries.sum() + len(log) != self.outcomes.tries.sum()
-                             or log.base.failures.sum() + log.n_failures
-                             != self.outcomes.failures.sum()):
-            raise InvalidSnapshot("the outcome log and its base do not add up to the counts",
-                                  field="outcome_log")
-        self.outcome_log = log
-
+                self.space.size, len(cfg.criteria), cfg.action.n_bins, cfg.risk.horizon,
+                cfg.limits.max_states, n, data["local_risk"])

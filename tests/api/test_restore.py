@@ -90,8 +90,8 @@ BROKEN = {
                                 "clustering.centres"),
     "a belief that is not a distribution": (
         set_first("streams", "open", "prob", value=-0.5), "streams.open.prob"),
-    "a risk that is not a probability": (
-        set_first("risk", "table", value=2.0), "risk.table"),
+    "a risk covariance beyond its prior": (
+        set_first("local_risk", "cov", value=1e6), "local_risk.cov"),
 }
 
 
@@ -198,7 +198,7 @@ def test_the_untouched_snapshots_still_restore(
 
 def test_a_local_risk_model_round_trips_over_http_and_refuses_its_damage() -> None:
     with TestClient(create_app(Settings(max_snapshot_bytes=LIMIT))) as c:
-        config = {"risk": {"model": "local", "horizon": 4}}
+        config = {"risk": {"horizon": 4}}
         assert c.post("/models", json={"name": "l", "config": config}).status_code == 201
         for _ in range(3):
             episode(c, "/models/l/revise")

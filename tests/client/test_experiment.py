@@ -81,8 +81,8 @@ def test_records_from_before_a_switch_existed_keep_the_value_it_was_added_with(
     format's version 1 that lacks it ran with it off, so only the overrides that turn it off
     again go on with those records."""
     arm = "idm-aggressive+shield"
-    off = dataclasses.replace(CONFIG, shield_config={
-        "reviser": {"activate_after_episodes": 2, "one_sided": False}})
+    off = dataclasses.replace(CONFIG, shield_config={  # (version 1's risk reviser: removed)
+        "reviser": {"method": "paper", "activate_after_episodes": 2, "one_sided": False}})
     runner.run_one(off, arm, 0, tmp_path)
     path = records.path_for(tmp_path, arm, 0)
     lines = path.read_text().splitlines(keepends=True)

@@ -18,14 +18,11 @@ import numpy as np
 import numpy.typing as npt
 
 from app.core import Shield, ShieldConfig
-from app.core.config import RiskConfig
 
 DATA = Path(__file__).parent.parent / "data"
 STEPS = 12_000
 EPISODE = 400  # steps before an episode ends without a failure
-PRESETS = {"default": ShieldConfig, "paper": ShieldConfig.paper,
-           # the risk reviser's counted model, the default until the local model
-           "counts": lambda: ShieldConfig(risk=RiskConfig(model="counts", horizon=8))}
+PRESETS = {"default": ShieldConfig, "paper": ShieldConfig.paper}
 
 
 def preset(name: str) -> ShieldConfig:
@@ -37,8 +34,8 @@ def preset(name: str) -> ShieldConfig:
 
 def drive(config: ShieldConfig, steps: int = STEPS, seed: int = 0) -> dict[str, npt.NDArray]:
     """Run the loop; per step the applied action, recognised state, state count, whether the
-    step was revised, why and the verdict, and the closing snapshot's risk table and local
-    risk weights (empty without the local model)."""
+    step was revised, why and the verdict, and the closing snapshot's local risk weights (empty
+    without the risk reviser)."""
     rng = np.random.default_rng(seed)
     shield = Shield(config)
     applied = np.full(steps, np.nan)
@@ -71,7 +68,7 @@ def drive(config: ShieldConfig, steps: int = STEPS, seed: int = 0) -> dict[str, 
     snapshot = shield.snapshot()
     local = snapshot["local_risk"]
     return {"applied": applied, "state": state, "n_states": n_states, "revised": revised,
-            "reason": reason, "verdict": verdict, "risk_table": snapshot["risk"]["table"],
+            "reason": reason, "verdict": verdict,
             "local_theta": np.zeros(0) if local is None else local["theta"]}
 
 

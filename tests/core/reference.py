@@ -23,28 +23,6 @@ def monotone(q_table: FloatArray, directions: Sequence[str]) -> FloatArray:
     return out
 
 
-def horizon_risk(tries: IntArray, failures: IntArray,
-                 moves: tuple[IntArray, IntArray, IntArray], directions: Sequence[str],
-                 horizon: int, prior_safe: float) -> FloatArray:
-    """Finite-horizon value iteration on the counted outcomes (app.core.risk.horizon_risk)."""
-    n, q, n_c = failures.shape
-    rows, cols, counts = moves
-    denominator = tries + prior_safe
-    p_fail = failures / denominator[:, :, None]
-    p_move = counts / denominator.ravel()[rows]
-    tried = tries > 0
-    q_table = monotone(p_fail, directions)
-    for _ in range(horizon - 1):
-        best = q_table.sum(axis=2).argmin(axis=1)
-        value = q_table[np.arange(n), best]
-        value[~tried.any(axis=1)] = 0.0
-        ahead = np.empty((n * q, n_c))
-        for c in range(n_c):
-            ahead[:, c] = np.bincount(rows, weights=p_move * value[cols, c], minlength=n * q)
-        q_table = monotone(p_fail + ahead.reshape(n, q, n_c), directions)
-    return q_table
-
-
 def choose(total: FloatArray, proposed_bin: int, limit: float, safe_step: int) -> int:
     """The proposal when within the limit, else the nearest allowed bin, ties to the safe
     side."""

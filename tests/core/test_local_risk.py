@@ -1,4 +1,4 @@
-"""The local risk model (``risk.model: local``): least squares on delayed labels, risk that
+"""The risk reviser's local model: least squares on delayed labels, risk that
 follows the observation within a state, snapshots, bad configurations."""
 
 from __future__ import annotations
@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.core import InvalidConfig, InvalidSnapshot, Shield, ShieldConfig
+from app.core import InvalidSnapshot, Shield, ShieldConfig
 from app.core.belief import Belief
 from app.core.local_risk import PRIOR_COV, LocalRisk
 from tests.core.test_risk import crash_world
 from tests.utils import assert_same
 
-LOCAL = {"risk": {"model": "local", "horizon": 4}}
+LOCAL = {"risk": {"horizon": 4}}
 SAFE = np.array([-1, 1], dtype=np.int64)  # collision-like, then falling-behind-like
 
 
@@ -231,9 +231,3 @@ def test_extreme_observations_leave_every_risk_a_probability() -> None:
         for value in decision.risk.values():
             assert 0.0 <= value <= 1.0
     assert shield.local_risk is not None and np.isfinite(shield.local_risk.theta).all()
-
-
-def test_a_bad_risk_model_names_its_field() -> None:
-    with pytest.raises(InvalidConfig) as error:
-        ShieldConfig.from_dict({"risk": {"model": "oracle"}})
-    assert error.value.field == "risk.model"

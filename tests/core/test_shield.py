@@ -167,11 +167,23 @@ def test_snapshot_restore_makes_the_same_decisions() -> None:
     assert_same(copy.snapshot(), shield.snapshot())
 
 
+def version_2(config: dict[str, Any]) -> dict[str, Any]:
+    """A configuration as version 2 of the stored format wrote it: the counted risk model's
+    settings, and the local model named."""
+    old = {key: dict(value) if isinstance(value, dict) else value
+           for key, value in config.items()}
+    old["version"] = 2
+    old["risk"].update(model="local", prior_safe=1.0, refresh_steps=500)
+    old["limits"]["outcome_log"] = 200_000
+    return old
+
+
 def version_1(config: dict[str, Any]) -> dict[str, Any]:
     """A configuration as version 1 of the stored format wrote it: no ``version``, with the
-    switches removed since at the values whose behaviour remains."""
-    old = {key: dict(value) if isinstance(value, dict) else value
-           for key, value in config.items() if key != "version"}
+    switches removed since at the values whose behaviour remains (the risk model of version 1
+    was the counted one: ``risk.model`` missing)."""
+    old = version_2(config)
+    del old["version"], old["risk"]["model"]
     old["observation"]["knee_shape"] = "double"
     old["clustering"]["failure_states"] = False
     old["reviser"].update(flag_rate_per="entry", failure_centres=False, noise_side="both")
@@ -238,10 +250,38 @@ def test_a_version_1_configuration_lacking_later_fields_keeps_their_first_values
 
 def test_a_configuration_carries_its_version_and_refuses_another() -> None:
     data = ShieldConfig().to_dict()
-    assert data["version"] == 2 and ShieldConfig.from_dict(data) == ShieldConfig()
+    assert data["version"] == 3 and ShieldConfig.from_dict(data) == ShieldConfig()
     with pytest.raises(InvalidConfig) as raised:
-        ShieldConfig.from_dict({**data, "version": 3})
+        ShieldConfig.from_dict({**data, "version": 4})
     assert raised.value.field == "version"
+
+
+def test_a_version_2_configuration_of_the_local_risk_model_loads_as_it_was() -> None:
+    config = ShieldConfig.from_dict({"risk": {"horizon": 12, "margin": 0.01}})
+    assert ShieldConfig.from_stored(version_2(config.to_dict())) == config
+    paper = version_2(ShieldConfig.paper().to_dict())
+    paper["risk"]["model"] = "counts"  # not read by the paper's reviser
+    assert ShieldConfig.from_stored(paper) == ShieldConfig.paper()
+
+
+@pytest.mark.parametrize("model", ["counts", None])
+def test_a_stored_risk_reviser_of_the_counted_model_is_refused_by_name(model: str | None
+                                                                       ) -> None:
+    """The counted risk model was removed in version 3; a version-2 configuration without
+    ``risk.model`` was written before the local model existed, so it used the counted one."""
+    old = version_2(ShieldConfig().to_dict())
+    if model is None:
+        del old["risk"]["model"]
+    else:
+        old["risk"]["model"] = model
+    with pytest.raises(InvalidConfig, match="removed in configuration version 3") as raised:
+        ShieldConfig.from_stored(old)
+    assert raised.value.field == "risk.model"
+    snapshot = Shield().snapshot()
+    snapshot["config"] = old
+    with pytest.raises(InvalidSnapshot) as refused:
+        Shield.from_snapshot(snapshot)
+    assert refused.value.field == "config.risk.model"
 
 
 def test_a_damaged_snapshot_is_refused() -> None:
