@@ -81,6 +81,7 @@ class LocalRisk:
         self.pending: dict[str, deque[Step]] = {}  # per stream, the steps awaiting labels
         self.failures = np.zeros(n_criteria, dtype=np.int64)  # learned, per criterion
         self.any_failure = False  # (read every step: cheaper than asking the array)
+        self._safe = np.zeros(n_criteria)  # the labels of a step no failure followed
 
     @property
     def theta(self) -> FloatArray:
@@ -102,36 +103,28 @@ class LocalRisk:
         self._high[n] = -np.inf
         self._n = n + 1
 
-    def features(self, z: FloatArray, action_bin: int) -> FloatArray:
-        """``phi(z, u) = [1, z, u]``."""
-        out = np.empty(self.size)
-        out[0] = 1.0
-        out[1:-1] = z
-        out[-1] = self.midpoints[action_bin]
-        return out
-
     def learn(self, stream: str, belief: Belief, z: FloatArray, action_bin: int,
               failure: int | None, ended: bool) -> None:
         """The stream's previous step (``belief`` and ``z`` before it, ``action_bin`` applied)
         ended in ``failure`` (a criterion index) or not; ``ended`` closes its episode."""
         queue = self.pending.setdefault(stream, deque())
-        home = belief.argmax()
-        self._tried[home, action_bin] += 1
-        np.minimum(self._low[home, action_bin], z, out=self._low[home, action_bin])
-        np.maximum(self._high[home, action_bin], z, out=self._high[home, action_bin])
+        phi = _observe(self._tried, self._low, self._high, belief.index, belief.prob, z,
+                       action_bin, self.midpoints)
         # a step's belief arrays are its own and never written after (no copy needed)
-        queue.append((belief.index, belief.prob, self.features(z, action_bin)))
-        labels = np.zeros(self.n_criteria)
+        queue.append((belief.index, belief.prob, phi))
+        if failure is None and not ended:
+            if len(queue) > self.horizon:  # old enough: no failure followed within it
+                _fit(self._theta, self._cov, *queue.popleft(), self._safe)
+            return
+        labels = self._safe
         if failure is not None:
+            labels = np.zeros(self.n_criteria)
             labels[failure] = 1.0
             self.failures[failure] += 1
             self.any_failure = True
-        if failure is not None or ended:
-            for step in queue:
-                _fit(self._theta, self._cov, *step, labels)
-            del self.pending[stream]
-        elif len(queue) > self.horizon:  # old enough: no failure followed within the horizon
-            _fit(self._theta, self._cov, *queue.popleft(), labels)
+        for step in queue:
+            _fit(self._theta, self._cov, *step, labels)
+        del self.pending[stream]
 
     def forget(self, stream: str) -> None:
         """Drop a stream's unlabelled steps (a stream that expired)."""
@@ -233,6 +226,26 @@ class LocalRisk:
                               phi[row].copy()))
                 at, row = at + size, row + 1
         return self
+
+
+@njit(cache=True)
+def _observe(tried: IntArray, low: FloatArray, high: FloatArray, index: IntArray,
+             prob: FloatArray, z: FloatArray, action_bin: int, midpoints: FloatArray
+             ) -> FloatArray:
+    """A step applied ``action_bin`` at ``z``: count it in the belief's most likely state (the
+    lowest index of equals) and widen that bin's box there to hold ``z``; returns the step's
+    ``phi(z, u) = [1, z, u]``."""
+    home = index[np.argmax(prob)]
+    tried[home, action_bin] += 1
+    d = z.shape[0]
+    phi = np.empty(d + 2)
+    phi[0] = 1.0
+    for r in range(d):
+        low[home, action_bin, r] = min(low[home, action_bin, r], z[r])
+        high[home, action_bin, r] = max(high[home, action_bin, r], z[r])
+        phi[r + 1] = z[r]
+    phi[d + 1] = midpoints[action_bin]
+    return phi
 
 
 @njit(cache=True)

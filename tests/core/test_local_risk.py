@@ -8,7 +8,7 @@ import pytest
 
 from app.core import InvalidSnapshot, Shield, ShieldConfig
 from app.core.belief import Belief
-from app.core.local_risk import PRIOR_COV, LocalRisk
+from app.core.local_risk import PRIOR_COV, FloatArray, LocalRisk
 from tests.core.test_risk import crash_world
 from tests.utils import assert_same
 
@@ -18,6 +18,11 @@ SAFE = np.array([-1, 1], dtype=np.int64)  # collision-like, then falling-behind-
 
 def one_state(weight: float = 1.0) -> Belief:
     return Belief(np.array([0]), np.array([weight]))
+
+
+def features(model: LocalRisk, z: FloatArray, action_bin: int) -> FloatArray:
+    """``phi(z, u) = [1, z, u]``, u the bin's midpoint scaled to [0, 1]."""
+    return np.array([1.0, *z, model.midpoints[action_bin]])
 
 
 def test_the_fit_is_weighted_ridge_least_squares_on_the_labelled_steps() -> None:
@@ -30,7 +35,7 @@ def test_the_fit_is_weighted_ridge_least_squares_on_the_labelled_steps() -> None
         failure = int(rng.integers(2)) if rng.random() < 0.2 else None
         # each step ends its own episode, so it is labelled at once
         model.learn(f"s{t}", one_state(weight), z, action_bin, failure, ended=True)
-        rows.append(model.features(z, action_bin))
+        rows.append(features(model, z, action_bin))
         labels.append([failure == c for c in range(2)])
         weights.append(weight)
     x, y, w = np.array(rows), np.array(labels, dtype=float), np.array(weights)
@@ -66,7 +71,7 @@ def test_an_untried_bin_takes_its_nearest_tried_bin_on_the_safe_side_or_none() -
     tried = np.empty((5, 2))
     tried[:] = np.nan
     for b in (1, 3):
-        value = model.theta[0] @ model.features(np.array([0.5]), b)
+        value = model.theta[0] @ features(model, np.array([0.5]), b)
         tried[b] = np.clip(value, 0.0, 1.0)
     # criterion 0 is safe towards bin 0: bin 0 has nothing tried on its safe side
     assert risk[:, 0].tolist() == pytest.approx([0.0, tried[1, 0], tried[1, 0], tried[3, 0],
@@ -90,7 +95,7 @@ def test_bins_safer_than_every_bin_applied_near_the_observation_carry_no_risk_th
                     ended=True)
 
     def model_at(x: float, b: int) -> float:
-        return float(np.clip(model.theta[0, 0] @ model.features(np.array([x]), b), 0, 1))
+        return float(np.clip(model.theta[0, 0] @ features(model, np.array([x]), b), 0, 1))
 
     far, near = np.empty((5, 1)), np.empty((5, 1))
     model.read(one_state(), np.array([0.8]), SAFE[:1], far)
