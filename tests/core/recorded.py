@@ -33,11 +33,15 @@ def preset(name: str) -> ShieldConfig:
 
 
 def drive(config: ShieldConfig, steps: int = STEPS, seed: int = 0) -> dict[str, npt.NDArray]:
+    """Run the loop on a new shield of ``config`` (:func:`run`)."""
+    return run(Shield(config), steps, seed)
+
+
+def run(shield: Shield, steps: int = STEPS, seed: int = 0) -> dict[str, npt.NDArray]:
     """Run the loop; per step the applied action, recognised state, state count, whether the
     step was revised, why and the verdict, and the closing snapshot's local risk weights (empty
     without the risk reviser)."""
     rng = np.random.default_rng(seed)
-    shield = Shield(config)
     applied = np.full(steps, np.nan)
     state = np.full(steps, -1, dtype=np.int64)
     n_states = np.zeros(steps, dtype=np.int64)
