@@ -35,6 +35,14 @@ def test_the_slow_failure_tuning_worlds_fall_behind_without_the_shield(name: str
     assert set(alone["failures"]) == {"large_distance"} and alone["total"] >= 3
 
 
+def test_the_flat_out_tuning_world_collides_without_the_shield_and_the_shield_drives() -> None:
+    world = world_named("tuning_flat_out")
+    alone = run(world, seed=0, episodes=6, warmup=0, config=None)
+    assert set(alone["failures"]) == {"collision"} and alone["total"] >= 5
+    shielded = run(world, seed=0, episodes=6, warmup=0, config=world.config)
+    assert shielded["revised"] > shielded["steps"] / 2  # every proposal is full acceleration
+
+
 def test_the_plain_tuning_worlds_differ_only_in_the_configuration() -> None:
     default, plain = world_named("tuning_idm"), world_named("tuning_idm_plain")
     assert plain.config.observation.high == (35.0, 200.0, 35.0)

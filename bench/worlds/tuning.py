@@ -1,7 +1,8 @@
 """The tuning worlds: the project's own car-following simulator (``client/sim``) with its
 non-learning controllers: the aggressive IDM (it collides), the sluggish one (it falls behind),
-the ordinary one reacting 2 s late (both), the random one, and a collapsed one that always
-brakes fully, as a DDPG actor stuck at its bound does (the shield has to drive). Each comes
+the ordinary one reacting 2 s late (both), the random one, a collapsed one that always
+brakes fully, as a DDPG actor stuck at its bound does, and one stuck at full acceleration (in
+both the shield has to drive). Each comes
 twice: with the project's car-following configuration, and (``_plain``) with the one a new
 user would write, the simulator's ranges scaled linearly (headway over 200 m, no knee),
 which gives the model few, broad states as the held-out worlds' configurations do. Beside
@@ -63,6 +64,7 @@ _CONTROLLERS: dict[str, tuple[str, Any]] = {
     "sluggish": ("idm-sluggish", lambda seed: PRESETS["sluggish"].act),
     "late": ("idm-late", LateIDM),
     "collapsed": ("collapsed", lambda seed: (lambda observation: -2.0)),
+    "flat_out": ("flat-out", lambda seed: (lambda observation: 2.0)),
     "random": ("random", lambda seed: RandomController(seed).act),
 }
 
