@@ -154,6 +154,7 @@ class StepInput:
 
     observation: FloatArray
     action: float | None
+    action_bin: int  # the proposal's bin (0 without a proposal)
     stream: str
     event: int | None
     done: bool
@@ -316,9 +317,11 @@ class Shield:
                                        field="event")
         if action is None and not done:
             raise InvalidAction("action is required unless done is true", field="action")
+        checked = None if action is None else self._check_action(action, "action")
         return StepInput(
             observation=z,
-            action=None if action is None else self._check_action(action, "action"),
+            action=checked,
+            action_bin=0 if checked is None else actions.encode(checked, self.config.action),
             stream=stream,
             event=criterion,
             done=bool(done),
@@ -380,7 +383,7 @@ class Shield:
                                 self._rng)
         assert decision.action is not None and step.action is not None
         state.belief, state.recognised, state.z = belief, recognised, z
-        state.proposed_bin = actions.encode(step.action, cfg.action)
+        state.proposed_bin = step.action_bin
         state.applied_bin = (state.proposed_bin if decision.action == step.action
                              else actions.encode(decision.action, cfg.action))
         state.step += 1
@@ -509,7 +512,7 @@ class Shield:
             return Decision(action=proposed, revised=False, reason="cold_start", verdict="ok",
                             risk=self._risk(None), threshold=None, candidates=(),
                             suggested=proposed, **common)  # type: ignore[arg-type]
-        start = actions.encode(proposed, cfg.action)
+        start = step.action_bin
         verdict, threshold, pred = assess(start)
         record = dict(verdict=self._verdict_name(verdict), risk=self._risk(pred),
                       threshold=threshold)
@@ -558,7 +561,7 @@ class Shield:
         if not local.any_failure:
             risks, limit, verdict, reason = self._risk(None), None, "ok", "cold_start"
         else:
-            start = actions.encode(proposed, cfg.action)
+            start = step.action_bin
             by_bin = np.empty((cfg.action.n_bins, len(names)))
             verdicts = np.empty(cfg.action.n_bins, dtype=np.int64)
             limit, worst, final, kept = local.decide(
