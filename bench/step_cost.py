@@ -59,8 +59,9 @@ def build(n: int, seed: int = SEED) -> Shield:
             shield.transitions.learn_one(prev, action, belief)
         failure = int(rng.integers(2)) if rng.random() < 0.005 else None
         assert shield.local_risk is not None
-        shield.local_risk.learn("history", prev, before, action, failure, ended=False)
+        shield.local_risk.learn(0, prev, before, action, failure, ended=False)
         prev = belief
+    shield.local_risk.forget(0)  # the slot the shield's first stream takes
     return shield
 
 

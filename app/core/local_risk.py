@@ -39,7 +39,7 @@ from the safe end (:func:`app.core.risk.monotone`).
 
 from __future__ import annotations
 
-from collections import deque
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -59,16 +59,18 @@ PRIOR_COV = 100.0  # initial covariance of every weight: a ridge of 1 / 100
 MIN_WEIGHT = 1e-3  # belief weights below this do not update a state
 
 
-Step = tuple[IntArray, FloatArray, FloatArray]  # belief states, their weights, phi(z, u)
-
-
 class LocalRisk:
-    """The per-state linear risk models and the streams' unlabelled steps."""
+    """The per-state linear risk models, and each stream's unlabelled steps.
+
+    A stream is known here by its slot (a small integer the shield hands out): its steps wait
+    in a ring of ``horizon + 1`` rows of arrays, each the step's belief (states, padded with
+    -1 and weight 0 up to ``belief_size``) and its ``phi``."""
 
     def __init__(self, dim: int, n_criteria: int, n_bins: int, horizon: int,
-                 max_states: int) -> None:
+                 max_states: int, belief_size: int, max_streams: int) -> None:
         self.dim, self.n_criteria, self.n_bins = dim, n_criteria, n_bins
-        self.horizon, self.max_states = horizon, max_states
+        self.horizon, self.max_states, self.belief_size = horizon, max_states, belief_size
+        self.max_streams = max_streams
         self.size = dim + 2  # [1, z, u]
         self._n = 0
         self._theta = np.zeros((0, n_criteria, self.size))
@@ -78,10 +80,17 @@ class LocalRisk:
         self._low = np.zeros((0, n_bins, dim))
         self._high = np.zeros((0, n_bins, dim))
         self.midpoints = (np.arange(n_bins) + 0.5) / n_bins
-        self.pending: dict[str, deque[Step]] = {}  # per stream, the steps awaiting labels
+        ring = horizon + 1
+        self._queue_index = np.zeros((0, ring, belief_size), dtype=np.int64)
+        self._queue_prob = np.zeros((0, ring, belief_size))
+        self._queue_phi = np.zeros((0, ring, self.size))
+        self._queue_ends = np.zeros((0, 2), dtype=np.int64)  # per slot: first row, length
         self.failures = np.zeros(n_criteria, dtype=np.int64)  # learned, per criterion
-        self.any_failure = False  # (read every step: cheaper than asking the array)
-        self._safe = np.zeros(n_criteria)  # the labels of a step no failure followed
+
+    @property
+    def any_failure(self) -> bool:
+        """Whether a failure was learned (before one, every risk is 0)."""
+        return bool(self.failures.any())
 
     @property
     def theta(self) -> FloatArray:
@@ -103,32 +112,35 @@ class LocalRisk:
         self._high[n] = -np.inf
         self._n = n + 1
 
-    def learn(self, stream: str, belief: Belief, z: FloatArray, action_bin: int,
-              failure: int | None, ended: bool) -> None:
-        """The stream's previous step (``belief`` and ``z`` before it, ``action_bin`` applied)
-        ended in ``failure`` (a criterion index) or not; ``ended`` closes its episode."""
-        queue = self.pending.setdefault(stream, deque())
-        phi = _observe(self._tried, self._low, self._high, belief.index, belief.prob, z,
-                       action_bin, self.midpoints)
-        # a step's belief arrays are its own and never written after (no copy needed)
-        queue.append((belief.index, belief.prob, phi))
-        if failure is None and not ended:
-            if len(queue) > self.horizon:  # old enough: no failure followed within it
-                _fit(self._theta, self._cov, *queue.popleft(), self._safe)
+    def reserve(self, slot: int) -> None:
+        """Room for the steps of the stream in ``slot``."""
+        if slot < self._queue_ends.shape[0]:
             return
-        labels = self._safe
-        if failure is not None:
-            labels = np.zeros(self.n_criteria)
-            labels[failure] = 1.0
-            self.failures[failure] += 1
-            self.any_failure = True
-        for step in queue:
-            _fit(self._theta, self._cov, *step, labels)
-        del self.pending[stream]
+        limit = self.max_streams
+        self._queue_index = ensure_capacity(self._queue_index, slot + 1, limit)
+        self._queue_prob = ensure_capacity(self._queue_prob, slot + 1, limit)
+        self._queue_phi = ensure_capacity(self._queue_phi, slot + 1, limit)
+        self._queue_ends = ensure_capacity(self._queue_ends, slot + 1, limit)
 
-    def forget(self, stream: str) -> None:
-        """Drop a stream's unlabelled steps (a stream that expired)."""
-        self.pending.pop(stream, None)
+    def learn(self, slot: int, belief: Belief, z: FloatArray, action_bin: int,
+              failure: int | None, ended: bool) -> None:
+        """The previous step of the stream in ``slot`` (``belief`` and ``z`` before it,
+        ``action_bin`` applied) ended in ``failure`` (a criterion index) or not; ``ended``
+        closes its episode. One compiled call."""
+        self.reserve(slot)
+        _learn(self._theta, self._cov, self._tried, self._low, self._high, self.midpoints,
+               self._queue_index, self._queue_prob, self._queue_phi, self._queue_ends,
+               self.failures, slot, belief.index, belief.prob, z, action_bin,
+               -1 if failure is None else failure, ended, self.horizon)
+
+    def pending(self, slot: int) -> int:
+        """How many steps of the stream in ``slot`` await their labels."""
+        return int(self._queue_ends[slot, 1]) if slot < self._queue_ends.shape[0] else 0
+
+    def forget(self, slot: int) -> None:
+        """Drop the unlabelled steps in ``slot`` (a stream that expired or ended)."""
+        if slot < self._queue_ends.shape[0]:
+            self._queue_ends[slot] = 0
 
     @property
     def tried(self) -> IntArray:
@@ -153,18 +165,24 @@ class LocalRisk:
                        belief.prob, z, self.midpoints, safe, proposed_bin, threshold, margin,
                        by_bin, verdicts)
 
-    def snapshot(self) -> dict[str, Any]:
+    def snapshot(self, slots: Mapping[str, int]) -> dict[str, Any]:
         """Exact state as arrays: the weights, their covariances, the bins' boxes and the
-        pending steps."""
-        names, lengths, index, prob, phi = [], [], [], [], []
-        for name, queue in self.pending.items():
+        pending steps of the streams named in ``slots`` (name to slot), in its order."""
+        names, lengths, sizes, index, prob, phi = [], [], [], [], [], []
+        ring = self.horizon + 1
+        for name, slot in slots.items():
+            length = self.pending(slot)
+            if not length:
+                continue
             names.append(name)
-            lengths.append(len(queue))
-            for i, p, f in queue:
-                index.append(i)
-                prob.append(p)
-                phi.append(f)
-        sizes = [i.size for i in index]
+            lengths.append(length)
+            first = int(self._queue_ends[slot, 0])
+            for row in ((first + j) % ring for j in range(length)):
+                size = int((self._queue_index[slot, row] >= 0).sum())
+                sizes.append(size)
+                index.append(self._queue_index[slot, row, :size])
+                prob.append(self._queue_prob[slot, row, :size])
+                phi.append(self._queue_phi[slot, row])
         return {"theta": self.theta.copy(), "cov": self._cov[: self._n].copy(),
                 "tried": self.tried.copy(), **self._boxes(),
                 "failures": self.failures.copy(), "streams": names,
@@ -181,11 +199,13 @@ class LocalRisk:
         return {"low": np.where(empty, 1.0, low), "high": np.where(empty, 0.0, high)}
 
     @classmethod
-    def restore(cls, dim: int, n_criteria: int, n_bins: int, horizon: int, max_states: int,
-                n_states: int, data: dict[str, Any]) -> LocalRisk:
-        """Rebuild from :meth:`snapshot` output, checking every part against the model."""
-        self = cls(dim, n_criteria, n_bins, horizon, max_states)
-        m = self.size
+    def restore(cls, shape: LocalRisk, n_states: int, slots: Mapping[str, int],
+                data: dict[str, Any]) -> LocalRisk:
+        """Rebuild from :meth:`snapshot` output into a model of ``shape``'s sizes (an empty
+        one), checking every part; ``slots`` gives each stream of the model its slot."""
+        self = cls(shape.dim, shape.n_criteria, shape.n_bins, shape.horizon,
+                   shape.max_states, shape.belief_size, shape.max_streams)
+        dim, n_criteria, n_bins, m = self.dim, self.n_criteria, self.n_bins, self.size
         theta = stored.floats(data["theta"], "local_risk.theta", (n_states, n_criteria, m))
         # the covariance only shrinks from PRIOR_COV * I as steps are fitted
         cov = stored.floats(data["cov"], "local_risk.cov", (n_states, m, m), low=-PRIOR_COV,
@@ -205,57 +225,97 @@ class LocalRisk:
                                       field="local_risk.low")
             self._low[~empty], self._high[~empty] = low[~empty], high[~empty]
         self.failures = stored.ints(data["failures"], "local_risk.failures", (n_criteria,)).copy()
-        self.any_failure = bool(self.failures.any())
+        self._restore_pending(n_states, slots, data)
+        return self
+
+    def _restore_pending(self, n_states: int, slots: Mapping[str, int],
+                         data: dict[str, Any]) -> None:
         names = data["streams"]
         if not isinstance(names, list) or not all(isinstance(s, str) for s in names):
             raise InvalidSnapshot("pending streams must be names", field="local_risk.streams")
+        if len(set(names)) != len(names) or not set(names) <= set(slots):
+            raise InvalidSnapshot("pending steps name each of the model's streams at most once",
+                                  field="local_risk.streams")
         lengths = stored.ints(data["lengths"], "local_risk.lengths", (len(names),), low=1,
-                              high=horizon + 1)
+                              high=self.horizon + 1)
         steps = int(lengths.sum())
-        sizes = stored.ints(data["sizes"], "local_risk.sizes", (steps,), low=1)
+        sizes = stored.ints(data["sizes"], "local_risk.sizes", (steps,), low=1,
+                            high=self.belief_size)
         index = stored.ints(data["index"], "local_risk.index", (int(sizes.sum()),), low=0,
                             high=max(n_states - 1, 0))
         prob = stored.floats(data["prob"], "local_risk.prob", index.shape, low=0.0, high=1.0)
-        phi = stored.floats(data["phi"], "local_risk.phi", (steps, m))
+        phi = stored.floats(data["phi"], "local_risk.phi", (steps, self.size))
         at = row = 0
         for name, length in zip(names, lengths.tolist(), strict=True):
-            queue = self.pending.setdefault(name, deque())
-            for _ in range(length):
+            slot = slots[name]
+            self.reserve(slot)
+            self._queue_ends[slot] = (0, length)
+            for j in range(length):
                 size = int(sizes[row])
-                queue.append((index[at:at + size].copy(), prob[at:at + size].copy(),
-                              phi[row].copy()))
+                self._queue_index[slot, j] = -1
+                self._queue_index[slot, j, :size] = index[at:at + size]
+                self._queue_prob[slot, j] = 0.0
+                self._queue_prob[slot, j, :size] = prob[at:at + size]
+                self._queue_phi[slot, j] = phi[row]
                 at, row = at + size, row + 1
-        return self
 
 
 @njit(cache=True)
-def _observe(tried: IntArray, low: FloatArray, high: FloatArray, index: IntArray,
-             prob: FloatArray, z: FloatArray, action_bin: int, midpoints: FloatArray
-             ) -> FloatArray:
-    """A step applied ``action_bin`` at ``z``: count it in the belief's most likely state (the
-    lowest index of equals) and widen that bin's box there to hold ``z``; returns the step's
-    ``phi(z, u) = [1, z, u]``."""
+def _learn(theta: FloatArray, cov: FloatArray, tried: IntArray, low: FloatArray,
+           high: FloatArray, midpoints: FloatArray, queue_index: IntArray,
+           queue_prob: FloatArray, queue_phi: FloatArray, queue_ends: IntArray,
+           failures: IntArray, slot: int, index: IntArray, prob: FloatArray, z: FloatArray,
+           action_bin: int, failure: int, ended: bool, horizon: int) -> None:
+    """:meth:`LocalRisk.learn` (``failure`` -1: none): count the step in the belief's most
+    likely state (the lowest index of equals) and widen that bin's box there to hold ``z``,
+    queue it with its ``phi(z, u) = [1, z, u]``, then fit the steps whose labels are known:
+    the oldest once it is ``horizon`` steps old, or every queued one at a failure or the
+    episode's end."""
     home = index[np.argmax(prob)]
     tried[home, action_bin] += 1
-    d = z.shape[0]
-    phi = np.empty(d + 2)
+    ring, d = queue_phi.shape[1], z.shape[0]
+    first, length = queue_ends[slot, 0], queue_ends[slot, 1]
+    row = (first + length) % ring
+    queue_index[slot, row, :] = -1
+    queue_prob[slot, row, :] = 0.0
+    for t in range(index.shape[0]):
+        queue_index[slot, row, t] = index[t]
+        queue_prob[slot, row, t] = prob[t]
+    phi = queue_phi[slot, row]
     phi[0] = 1.0
     for r in range(d):
         low[home, action_bin, r] = min(low[home, action_bin, r], z[r])
         high[home, action_bin, r] = max(high[home, action_bin, r], z[r])
         phi[r + 1] = z[r]
     phi[d + 1] = midpoints[action_bin]
-    return phi
+    length += 1
+    labels = np.zeros(failures.shape[0])
+    if failure < 0 and not ended:
+        if length > horizon:  # old enough: no failure followed within it
+            _fit(theta, cov, queue_index[slot, first], queue_prob[slot, first],
+                 queue_phi[slot, first], labels)
+            first, length = (first + 1) % ring, length - 1
+        queue_ends[slot, 0], queue_ends[slot, 1] = first, length
+        return
+    if failure >= 0:
+        labels[failure] = 1.0
+        failures[failure] += 1
+    for j in range(length):
+        row = (first + j) % ring
+        _fit(theta, cov, queue_index[slot, row], queue_prob[slot, row], queue_phi[slot, row],
+             labels)
+    queue_ends[slot, 0], queue_ends[slot, 1] = 0, 0
 
 
 @njit(cache=True)
 def _fit(theta: FloatArray, cov: FloatArray, index: IntArray, prob: FloatArray,
          phi: FloatArray, labels: FloatArray) -> None:
     """One labelled step into each belief state's weights: weighted recursive least squares
-    with weight ``prob`` (the state's membership), every criterion sharing the covariance."""
+    with weight ``prob`` (the state's membership), every criterion sharing the covariance.
+    Entries of weight below ``MIN_WEIGHT`` (the queue's padding among them) change nothing."""
     m = phi.shape[0]
     gain = np.empty(m)
-    for t in range(index.shape[0]):
+    for t in range(index.shape[0]):  # (padding: weight 0)
         i, weight = index[t], prob[t]
         if weight < MIN_WEIGHT:
             continue

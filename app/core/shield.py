@@ -165,8 +165,10 @@ class StepInput:
 
 @dataclass
 class StreamState:
-    """What a stream remembers between its steps: tau and the action behind the transition."""
+    """What a stream remembers between its steps: tau and the action behind the transition,
+    and its slot in the tables kept per stream (the local risk model's unlabelled steps)."""
 
+    slot: int
     belief: Belief | None = None
     applied_bin: int = 0
     proposed_bin: int = 0
@@ -217,7 +219,8 @@ class Shield:
         self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria),
                                 cfg.reviser.flag_min_rate)
         self.local_risk = self._new_local_risk()
-        self.streams: dict[str, StreamState] = {}
+        self.streams: dict[str, StreamState] = {}  # least recently stepped first
+        self._free_slots: list[int] = []  # slots of streams that ended, reused first
         self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria})
         self._rng = np.random.default_rng(cfg.reviser.seed)
 
@@ -226,7 +229,8 @@ class Shield:
         if cfg.reviser.method != "risk":
             return None
         return LocalRisk(self.space.size, len(cfg.criteria), cfg.action.n_bins,
-                         cfg.risk.horizon, cfg.limits.max_states)
+                         cfg.risk.horizon, cfg.limits.max_states, cfg.limits.belief_top_k,
+                         cfg.limits.max_streams)
 
     def _new_transitions(self) -> TransitionModel:
         cfg = self.config
@@ -376,7 +380,7 @@ class Shield:
             if cfg.transitions.across_episodes:  # A13 literal: the next reset is learned
                 state.belief, state.recognised, state.step, state.z = belief, recognised, 0, z
             else:
-                del self.streams[step.stream]
+                self._end_stream(step.stream)
             return closing
 
         decision = self._decide(step, z, belief, recognised, update.is_new, state.step,
@@ -396,15 +400,24 @@ class Shield:
         makes the model forget the least recently used one (as if its episode had ended)."""
         state = self.streams.pop(name, None)
         if state is None:
-            state = StreamState()
             if len(self.streams) >= self.config.limits.max_streams:
-                expired = next(iter(self.streams))
-                del self.streams[expired]
-                if self.local_risk is not None:
-                    self.local_risk.forget(expired)
+                self._end_stream(next(iter(self.streams)))
                 self.counters.streams_expired += 1
+            state = StreamState(self._new_slot())
         self.streams[name] = state
         return state
+
+    def _new_slot(self) -> int:
+        """A free slot in the tables kept per stream: one a stream left, else the next."""
+        return self._free_slots.pop() if self._free_slots else (
+            len(self.streams) + len(self._free_slots))
+
+    def _end_stream(self, name: str) -> None:
+        """Forget a stream (its episode ended, or it expired); its slot is free again."""
+        slot = self.streams.pop(name).slot
+        if self.local_risk is not None:
+            self.local_risk.forget(slot)
+        self._free_slots.append(slot)
 
     def _add_state(self) -> None:
         """A state was created: every per-state table grows by one."""
@@ -422,7 +435,7 @@ class Shield:
             return  # (a stream restored from a snapshot of the paper's reviser lacks z)
         action_bin = (state.applied_bin if step.applied_action is None
                       else actions.encode(step.applied_action, self.config.action))
-        self.local_risk.learn(step.stream, state.belief, state.z, action_bin, step.event,
+        self.local_risk.learn(state.slot, state.belief, state.z, action_bin, step.event,
                               step.done)
 
     def _learn_transition(
@@ -444,7 +457,7 @@ class Shield:
 
     def _what_if(self, step: StepInput) -> Decision:
         """``learn=False``: answer from the model as it is, changing nothing (noise included)."""
-        state = self.streams.get(step.stream, StreamState())
+        state = self.streams.get(step.stream) or StreamState(-1)
         if self.n_states == 0:
             return self._closing(step, None, False, state.step) if step.done else Decision(
                 action=step.action, proposed=step.action, revised=False, reason="cold_start",
@@ -651,7 +664,8 @@ class Shield:
             "clustering": self.clusterer.snapshot(),
             "transitions": self.transitions.snapshot(),
             "flags": self.flags.snapshot(),
-            "local_risk": None if self.local_risk is None else self.local_risk.snapshot(),
+            "local_risk": None if self.local_risk is None else self.local_risk.snapshot(
+                {name: s.slot for name, s in self.streams.items()}),
             "streams": {
                 name: {
                     "index": None if s.belief is None else s.belief.index.copy(),
@@ -712,20 +726,19 @@ class Shield:
         n = self.clusterer.n_states
         if self.transitions.n_states != n or self.flags.flags.shape[0] != n:
             raise InvalidSnapshot("states, matrices and flags disagree on the state count")
-        self._restore_risk(data, n)
         streams = data["streams"]
         if len(streams) > cfg.limits.max_streams:
             raise InvalidSnapshot(f"more than {cfg.limits.max_streams} streams",
                                   field="streams")
-        self.streams = {str(name): self._restore_stream(f"streams.{name}", s, n)
-                        for name, s in streams.items()}
-        if self.local_risk is not None and set(self.local_risk.pending) - set(self.streams):
-            raise InvalidSnapshot("pending risk steps name a stream the model lacks",
-                                  field="local_risk.streams")
+        self.streams = {str(name): self._restore_stream(f"streams.{name}", s, n, slot)
+                        for slot, (name, s) in enumerate(streams.items())}
+        self._restore_risk(data, n)
         return self
 
-    def _restore_stream(self, field: str, data: dict[str, Any], n: int) -> StreamState:
-        """One stream's state, its belief and bins checked against the model's sizes."""
+    def _restore_stream(self, field: str, data: dict[str, Any], n: int, slot: int
+                        ) -> StreamState:
+        """One stream's state in ``slot``, its belief and bins checked against the model's
+        sizes."""
         if not 1 <= len(field) - len("streams.") <= 128:
             raise InvalidSnapshot("stream names have 1 to 128 characters", field=field)
         belief = None
@@ -737,7 +750,7 @@ class Shield:
                 raise InvalidSnapshot("a belief names distinct states", field=f"{field}.index")
             belief = Belief(index, prob)
         q = self.config.action.n_bins
-        return StreamState(belief,
+        return StreamState(slot, belief,
                            stored.integer(data["applied_bin"], f"{field}.applied_bin",
                                           high=q - 1),
                            stored.integer(data["proposed_bin"], f"{field}.proposed_bin",
@@ -751,7 +764,5 @@ class Shield:
         """The risk reviser's local model (a snapshot of format 3 also holds the counts of the
         model removed since, which this version does not read)."""
         if self.local_risk is not None:
-            cfg = self.config
-            self.local_risk = LocalRisk.restore(
-                self.space.size, len(cfg.criteria), cfg.action.n_bins, cfg.risk.horizon,
-                cfg.limits.max_states, n, data["local_risk"])
+            slots = {name: s.slot for name, s in self.streams.items()}
+            self.local_risk = LocalRisk.restore(self.local_risk, n, slots, data["local_risk"])

@@ -14,6 +14,7 @@ from tests.utils import assert_same
 
 LOCAL = {"risk": {"horizon": 4}}
 SAFE = np.array([-1, 1], dtype=np.int64)  # collision-like, then falling-behind-like
+ONE_STREAM = {"belief_size": 4, "max_streams": 1}  # every test stream in slot 0
 
 
 def one_state(weight: float = 1.0) -> Belief:
@@ -27,14 +28,14 @@ def features(model: LocalRisk, z: FloatArray, action_bin: int) -> FloatArray:
 
 def test_the_fit_is_weighted_ridge_least_squares_on_the_labelled_steps() -> None:
     rng = np.random.default_rng(0)
-    model = LocalRisk(dim=2, n_criteria=2, n_bins=5, horizon=1, max_states=4)
+    model = LocalRisk(dim=2, n_criteria=2, n_bins=5, horizon=1, max_states=4, **ONE_STREAM)
     model.add_state()
     rows, labels, weights = [], [], []
-    for t in range(200):
+    for _ in range(200):
         z, action_bin, weight = rng.uniform(0, 1, 2), int(rng.integers(5)), rng.uniform(0.1, 1)
         failure = int(rng.integers(2)) if rng.random() < 0.2 else None
         # each step ends its own episode, so it is labelled at once
-        model.learn(f"s{t}", one_state(weight), z, action_bin, failure, ended=True)
+        model.learn(0, one_state(weight), z, action_bin, failure, ended=True)
         rows.append(features(model, z, action_bin))
         labels.append([failure == c for c in range(2)])
         weights.append(weight)
@@ -45,15 +46,15 @@ def test_the_fit_is_weighted_ridge_least_squares_on_the_labelled_steps() -> None
 
 
 def test_a_step_is_labelled_safe_after_the_horizon_and_failed_when_a_failure_follows() -> None:
-    model = LocalRisk(dim=1, n_criteria=2, n_bins=3, horizon=3, max_states=2)
+    model = LocalRisk(dim=1, n_criteria=2, n_bins=3, horizon=3, max_states=2, **ONE_STREAM)
     model.add_state()
     z = np.array([0.5])
     for _ in range(5):  # five safe steps: the first two are older than the horizon
-        model.learn("a", one_state(), z, 1, None, ended=False)
-    assert len(model.pending["a"]) == 3  # two were labelled safe
+        model.learn(0, one_state(), z, 1, None, ended=False)
+    assert model.pending(0) == 3  # two were labelled safe
     safe = model.theta.copy()
-    model.learn("a", one_state(), z, 2, 1, ended=True)  # a failure of criterion 1
-    assert "a" not in model.pending and model.failures.tolist() == [0, 1]
+    model.learn(0, one_state(), z, 2, 1, ended=True)  # a failure of criterion 1
+    assert model.pending(0) == 0 and model.failures.tolist() == [0, 1]
     risk = np.empty((3, 2))
     model.read(one_state(), z, SAFE, risk)
     assert risk[1, 1] > 0.1 and risk[1, 0] == 0.0  # criterion 1's risk rose, 0's did not
@@ -62,10 +63,10 @@ def test_a_step_is_labelled_safe_after_the_horizon_and_failed_when_a_failure_fol
 
 def test_an_untried_bin_takes_its_nearest_tried_bin_on_the_safe_side_or_none() -> None:
     # one state, bins 0..4; only bins 1 and 3 applied there, both ended in failures of both
-    model = LocalRisk(dim=1, n_criteria=2, n_bins=5, horizon=1, max_states=2)
+    model = LocalRisk(dim=1, n_criteria=2, n_bins=5, horizon=1, max_states=2, **ONE_STREAM)
     model.add_state()
     for t in range(30):
-        model.learn(str(t), one_state(), np.array([0.5]), 1 + 2 * (t % 2), t % 2, ended=True)
+        model.learn(0, one_state(), np.array([0.5]), 1 + 2 * (t % 2), t % 2, ended=True)
     risk = np.empty((5, 2))
     model.read(one_state(), np.array([0.5]), SAFE, risk)
     tried = np.empty((5, 2))
@@ -85,13 +86,13 @@ def test_an_untried_bin_takes_its_nearest_tried_bin_on_the_safe_side_or_none() -
 def test_bins_safer_than_every_bin_applied_near_the_observation_carry_no_risk_there() -> None:
     # one broad state, a controller that brakes (bin 1) only when it is too late, at small x,
     # and cruises (bin 3) at large x: braking is learned with crashing (the confound)
-    model = LocalRisk(dim=1, n_criteria=1, n_bins=5, horizon=1, max_states=2)
+    model = LocalRisk(dim=1, n_criteria=1, n_bins=5, horizon=1, max_states=2, **ONE_STREAM)
     model.add_state()
     rng = np.random.default_rng(2)
     for t in range(200):
         brake = t % 2 == 0
         x = rng.uniform(0.0, 0.3) if brake else rng.uniform(0.6, 1.0)
-        model.learn(str(t), one_state(), np.array([x]), 1 if brake else 3, 0 if brake else None,
+        model.learn(0, one_state(), np.array([x]), 1 if brake else 3, 0 if brake else None,
                     ended=True)
 
     def model_at(x: float, b: int) -> float:
@@ -120,7 +121,7 @@ def test_a_snapshot_without_boxes_restores_with_none_and_a_bad_box_is_refused() 
     older = {k: v for k, v in local.items() if k not in ("low", "high")}
     restored = Shield.from_snapshot({**data, "local_risk": older}).local_risk
     assert restored is not None
-    boxes = restored.snapshot()
+    boxes = restored.snapshot({})
     assert (boxes["low"] == 1.0).all() and (boxes["high"] == 0.0).all()  # all empty
     assert_same(restored.theta, shield.local_risk.theta)
     assert_same(Shield.from_snapshot(Shield.from_snapshot(
@@ -134,13 +135,13 @@ def test_a_snapshot_without_boxes_restores_with_none_and_a_bad_box_is_refused() 
 
 
 def test_a_failure_stays_visible_after_many_safe_tries_of_another_action() -> None:
-    model = LocalRisk(dim=1, n_criteria=1, n_bins=5, horizon=1, max_states=2)
+    model = LocalRisk(dim=1, n_criteria=1, n_bins=5, horizon=1, max_states=2, **ONE_STREAM)
     model.add_state()
     z = np.array([0.5])
     for t in range(5):  # bin 4: one failure in five tries
-        model.learn(f"fast{t}", one_state(), z, 4, 0 if t == 0 else None, ended=True)
-    for t in range(10_000):  # bin 0: always safe
-        model.learn(f"slow{t}", one_state(), z, 0, None, ended=True)
+        model.learn(0, one_state(), z, 4, 0 if t == 0 else None, ended=True)
+    for _ in range(10_000):  # bin 0: always safe
+        model.learn(0, one_state(), z, 0, None, ended=True)
     risk = np.empty((5, 1))
     model.read(one_state(), z, SAFE[:1], risk)
     assert risk[4, 0] == pytest.approx(0.2, abs=0.01) and risk[0, 0] < 1e-3
@@ -148,12 +149,12 @@ def test_a_failure_stays_visible_after_many_safe_tries_of_another_action() -> No
 
 def test_the_risk_follows_the_observation_within_one_state() -> None:
     # one broad state; failures follow only from small x: far from them the risk stays low
-    model = LocalRisk(dim=1, n_criteria=1, n_bins=3, horizon=2, max_states=2)
+    model = LocalRisk(dim=1, n_criteria=1, n_bins=3, horizon=2, max_states=2, **ONE_STREAM)
     model.add_state()
     rng = np.random.default_rng(1)
-    for episode in range(400):
+    for _ in range(400):
         x = rng.uniform(0, 1)
-        model.learn(str(episode), one_state(), np.array([x]), 1, 0 if x < 0.2 else None,
+        model.learn(0, one_state(), np.array([x]), 1, 0 if x < 0.2 else None,
                     ended=True)
     near, far = np.empty((3, 1)), np.empty((3, 1))
     model.read(one_state(), np.array([0.05]), SAFE[:1], near)
@@ -180,7 +181,8 @@ def test_a_model_with_pending_steps_round_trips_and_decides_alike() -> None:
     crash_world(shield, 15, seed=3)
     for t in range(3):  # a stream left in the middle of an episode
         shield.step([12.0 + t, 30.0, 11.0], 0.5, stream="open")
-    assert shield.local_risk is not None and shield.local_risk.pending
+    assert shield.local_risk is not None
+    assert shield.local_risk.pending(shield.streams["open"].slot) == 2  # (the first: none)
     copy = Shield.from_snapshot(shield.snapshot())
     assert_same(copy.snapshot(), shield.snapshot())
     for speed in (25.0, 28.0, 12.0):
