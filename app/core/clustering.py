@@ -30,13 +30,10 @@ class StateUpdate:
 
     ``kind`` is ``new`` (a state was created), ``replaced`` (the nearest centre moved onto the
     observation) or ``assigned`` (the nearest state absorbed it and widened its spread).
-    ``sq_distances`` are the squared distances from the observation to every centre *after*
-    the update, ready for recognition (Eq. 1).
     """
 
     kind: Literal["new", "replaced", "assigned"]
     index: int
-    sq_distances: FloatArray
 
     @property
     def is_new(self) -> bool:
@@ -44,67 +41,85 @@ class StateUpdate:
         return self.kind == "new"
 
 
+# rows of the per-state numbers (EvolvingClusterer.stats) and of its counts
+SQ_NORM, POTENTIAL, RADIUS, SCATTER, VARIANCE = range(5)
+SAMPLES, STATES, CAPACITY_HITS = range(3)
+
+
 class EvolvingClusterer:
     """eTS / eTS+ evolving clustering of normalised observations (docs/algorithm.md).
 
     The potential of a point is its inverse mean squared distance to all earlier samples,
     ``P_k(z) = 1 / (1 + mean_l ||z - z_l||^2)``, kept recursively in O(d) memory.
+
+    Everything a step changes lives in arrays, so that a compiled step can take them whole:
+    the centres (dimension x state: the distances vectorise), the per-state numbers
+    (``stats``: squared norm, potential, radius, scatter and variance, one row each), the
+    support, the running sums (``sums``: beta, the sum of earlier samples, then sigma, the sum
+    of their squared norms) and the counts (samples, states, capacity hits).
     """
 
     def __init__(self, config: ClusteringConfig, dim: int, max_states: int) -> None:
         self.config = config
         self.dim = dim
         self.max_states = max_states
-        self.k = 0  # samples seen, never reset between episodes
-        self.beta = np.zeros(dim)  # sum of earlier samples
-        self.sigma = 0.0  # sum of their squared norms
-        self.capacity_hits = 0
-        self._n = 0
-        self._centres = np.zeros((dim, 0))  # dimension-major: the distances vectorise
-        self._sq_norms = np.zeros(0)
-        self._potentials = np.zeros(0)
-        self._radii = np.zeros(0)
-        self._support = np.zeros(0, dtype=np.int64)
-        self._scatter = np.zeros(0)
-        self._variances = np.zeros(0)
+        self.counts = np.zeros(3, dtype=np.int64)
+        self.sums = np.zeros(dim + 1)
+        self.params = np.array([config.epsilon, config.rho, config.min_variance])
+        self.modes = np.array([config.creation_rule == "ets_plus", _SPREADS[config.spread],
+                               max_states], dtype=np.int64)
+        self.centres_t = np.zeros((dim, 0))
+        self.stats = np.zeros((5, 0))
+        self.support_counts = np.zeros(0, dtype=np.int64)
+
+    @property
+    def k(self) -> int:
+        """Samples seen, never reset between episodes."""
+        return int(self.counts[SAMPLES])
 
     @property
     def n_states(self) -> int:
         """Number of states (cluster centres)."""
-        return self._n
+        return int(self.counts[STATES])
+
+    @property
+    def capacity_hits(self) -> int:
+        """Observations that would have made a state beyond ``max_states``."""
+        return int(self.counts[CAPACITY_HITS])
 
     @property
     def centres(self) -> FloatArray:
         """Cluster centres, one row per state, normalised units (read-only view)."""
-        view = self._centres[:, : self._n].T
+        view = self.centres_t[:, : self.n_states].T
         view.flags.writeable = False
         return view
 
     @property
     def potentials(self) -> FloatArray:
         """Potential of every centre."""
-        return self._potentials[: self._n].copy()
+        return self.stats[POTENTIAL, : self.n_states].copy()
 
     @property
     def radii(self) -> FloatArray:
         """Zone-of-influence radius of every state (starts at epsilon, smoothed with rho)."""
-        return self._radii[: self._n].copy()
+        return self.stats[RADIUS, : self.n_states].copy()
 
     @property
     def support(self) -> npt.NDArray[np.int64]:
         """Observations absorbed by each state (the sample that created it included)."""
-        return self._support[: self._n].copy()
+        return self.support_counts[: self.n_states].copy()
 
     def variances(self) -> FloatArray:
         """var(s^i) of Eq. 1 per state (docs/algorithm.md), read-only view."""
-        view = self._variances[: self._n]
+        view = self.stats[VARIANCE, : self.n_states]
         view.flags.writeable = False
         return view
 
     def sq_distances(self, z: FloatArray) -> FloatArray:
         """Squared distances from z to every centre: ||c||^2 - 2 c.z + ||z||^2, clipped at 0."""
-        out = np.empty(self._n)
-        _sq_distances(self._centres, self._sq_norms, self._n, z, _dot(z, z), out)
+        n = self.n_states
+        out = np.empty(n)
+        _sq_distances(self.centres_t, self.stats[SQ_NORM], n, z, _dot(z, z), out)
         return out
 
     def learn_one(self, z: FloatArray) -> StateUpdate:
@@ -113,52 +128,46 @@ class EvolvingClusterer:
 
     def learn_and_recognise(self, z: FloatArray, k: int) -> tuple[StateUpdate, Belief]:
         """Cluster one normalised observation (it may create or move one state), then the
-        belief over the states after it (Eq. 1, top ``k``): one compiled call, the step's
-        first."""
-        cfg = self.config
-        n = self._n
-        if n == self._centres.shape[1]:
-            self._reserve(n + 1)
-        self.k += 1
-        d2 = np.empty(n + 1)
-        index = np.empty(min(n + 1, k), dtype=np.int64)
-        prob = np.empty(index.shape[0])
-        kind, at, self.sigma, hit, m = _learn_and_recognise(
-            z, self.k, self.beta, self.sigma, self._centres, self._sq_norms, self._potentials,
-            self._radii, self._support, self._scatter, self._variances, n, self.max_states,
-            cfg.epsilon, cfg.rho, cfg.creation_rule == "ets_plus", _SPREADS[cfg.spread],
-            cfg.min_variance, d2, k, index, prob)
-        self.capacity_hits += hit
-        if kind == NEW:
-            self._n = n + 1
-        else:
-            d2 = d2[:n]
-        return StateUpdate(_KINDS[kind], at, d2), Belief(index[:m], prob[:m])
+        belief over the states after it (Eq. 1, top ``k``): one compiled call."""
+        self.make_room()
+        size = min(self.n_states + 1, k)
+        index = np.empty(size, dtype=np.int64)
+        prob = np.empty(size)
+        kind, at, m = learn_and_recognise(z, *self.arrays(), k, index, prob)
+        return StateUpdate(_KINDS[kind], at), Belief(index[:m], prob[:m])
 
-    def _reserve(self, needed: int) -> None:
+    def arrays(self) -> tuple[FloatArray, FloatArray, npt.NDArray[np.int64], FloatArray,
+                              npt.NDArray[np.int64], FloatArray, npt.NDArray[np.int64]]:
+        """What a compiled step clusters with (:func:`learn_and_recognise`'s arrays, in
+        order); the same arrays until :meth:`make_room` replaces them."""
+        return (self.centres_t, self.stats, self.support_counts, self.sums, self.counts,
+                self.params, self.modes)
+
+    def make_room(self) -> bool:
+        """Room for one more state (whether the arrays were replaced to make it)."""
+        n = self.n_states
+        if n < self.centres_t.shape[1]:
+            return False
         limit = self.max_states
-        self._centres = ensure_capacity(self._centres, needed, limit, axis=1)
-        self._sq_norms = ensure_capacity(self._sq_norms, needed, limit)
-        self._potentials = ensure_capacity(self._potentials, needed, limit)
-        self._radii = ensure_capacity(self._radii, needed, limit)
-        self._support = ensure_capacity(self._support, needed, limit)
-        self._scatter = ensure_capacity(self._scatter, needed, limit)
-        self._variances = ensure_capacity(self._variances, needed, limit)
+        self.centres_t = ensure_capacity(self.centres_t, n + 1, limit, axis=1)
+        self.stats = ensure_capacity(self.stats, n + 1, limit, axis=1)
+        self.support_counts = ensure_capacity(self.support_counts, n + 1, limit)
+        return True
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state as plain data and arrays."""
-        n = self._n
+        n = self.n_states
         return {
             "k": self.k,
-            "beta": self.beta.copy(),
-            "sigma": self.sigma,
+            "beta": self.sums[: self.dim].copy(),
+            "sigma": float(self.sums[self.dim]),
             "capacity_hits": self.capacity_hits,
-            "centres": self._centres[:, :n].T.copy(),
-            "sq_norms": self._sq_norms[:n].copy(),
-            "potentials": self._potentials[:n].copy(),
-            "radii": self._radii[:n].copy(),
-            "support": self._support[:n].copy(),
-            "scatter": self._scatter[:n].copy(),
+            "centres": self.centres_t[:, :n].T.copy(),
+            "sq_norms": self.stats[SQ_NORM, :n].copy(),
+            "potentials": self.stats[POTENTIAL, :n].copy(),
+            "radii": self.stats[RADIUS, :n].copy(),
+            "support": self.support_counts[:n].copy(),
+            "scatter": self.stats[SCATTER, :n].copy(),
         }
 
     @classmethod
@@ -167,27 +176,32 @@ class EvolvingClusterer:
     ) -> EvolvingClusterer:
         """Rebuild a clusterer from :meth:`snapshot` output, every part checked."""
         self = cls(config, dim, max_states)
-        self.k = stored.integer(data["k"], "clustering.k")
-        self.beta = stored.floats(data["beta"], "clustering.beta", (dim,))
-        self.sigma = stored.real(data["sigma"], "clustering.sigma", low=0.0)
-        self.capacity_hits = stored.integer(data["capacity_hits"], "clustering.capacity_hits")
+        self.counts[SAMPLES] = stored.integer(data["k"], "clustering.k")
+        self.sums[:dim] = stored.floats(data["beta"], "clustering.beta", (dim,))
+        self.sums[dim] = stored.real(data["sigma"], "clustering.sigma", low=0.0)
+        self.counts[CAPACITY_HITS] = stored.integer(data["capacity_hits"],
+                                                    "clustering.capacity_hits")
         centres = stored.floats(data["centres"], "clustering.centres")
         n = centres.size // dim if dim else 0
         if centres.shape not in ((n, dim), (n * dim,)) or n > max_states:
             raise InvalidSnapshot(f"expected at most {max_states} centres of {dim} numbers",
                                   field="clustering.centres")
-        self._n = n
-        self._centres = np.ascontiguousarray(centres.reshape(n, dim).T)
-        self._sq_norms = stored.floats(data["sq_norms"], "clustering.sq_norms", (n,), low=0.0)
-        self._potentials = stored.floats(data["potentials"], "clustering.potentials", (n,))
-        self._radii = stored.floats(data["radii"], "clustering.radii", (n,), low=0.0)
-        self._support = stored.ints(data["support"], "clustering.support", (n,), low=1)
-        self._scatter = stored.floats(data["scatter"], "clustering.scatter", (n,), low=0.0)
-        self._variances = np.zeros(n)
+        self.counts[STATES] = n
+        self.centres_t = np.ascontiguousarray(centres.reshape(n, dim).T)
+        self.stats = np.zeros((5, n))
+        self.stats[SQ_NORM] = stored.floats(data["sq_norms"], "clustering.sq_norms", (n,),
+                                            low=0.0)
+        self.stats[POTENTIAL] = stored.floats(data["potentials"], "clustering.potentials",
+                                              (n,))
+        self.stats[RADIUS] = stored.floats(data["radii"], "clustering.radii", (n,), low=0.0)
+        self.support_counts = stored.ints(data["support"], "clustering.support", (n,), low=1)
+        self.stats[SCATTER] = stored.floats(data["scatter"], "clustering.scatter", (n,),
+                                            low=0.0)
         spread = _SPREADS[config.spread]
         for i in range(n):
-            _refresh_variance(self._variances, self._radii, self._support, self._scatter, i,
-                              spread, config.epsilon, config.min_variance)
+            _refresh_variance(self.stats[VARIANCE], self.stats[RADIUS], self.support_counts,
+                              self.stats[SCATTER], i, spread, config.epsilon,
+                              config.min_variance)
         return self
 
 
@@ -223,22 +237,29 @@ def _sq_distances(centres: FloatArray, sq_norms: FloatArray, n: int, z: FloatArr
 
 
 @njit(cache=True)
-def _learn_and_recognise(z: FloatArray, k: int, beta: FloatArray, sigma: float,
-                         centres: FloatArray, sq_norms: FloatArray, potentials: FloatArray,
-                         radii: FloatArray, support: npt.NDArray[np.int64], scatter: FloatArray,
-                         variances: FloatArray, n: int, max_states: int, epsilon: float,
-                         rho: float, ets_plus: bool, spread: int, min_variance: float,
-                         d2: FloatArray, top: int, index: npt.NDArray[np.int64],
-                         prob: FloatArray) -> tuple[int, int, float, int, int]:
-    """:func:`_learn`, then :func:`~app.core.belief._recognise` on the states after it:
-    the update's kind, the state it touched, the new sigma, whether a candidate met the
-    state limit, and the belief's size (in ``index`` and ``prob``)."""
-    kind, at, sigma, hit = _learn(z, k, beta, sigma, centres, sq_norms, potentials, radii,
-                                  support, scatter, variances, n, max_states, epsilon, rho,
-                                  ets_plus, spread, min_variance, d2)
-    states = n + 1 if kind == NEW else n
-    m = _recognise(d2[:states], variances[:states], top, index, prob)
-    return kind, at, sigma, hit, m
+def learn_and_recognise(z: FloatArray, centres: FloatArray, stats: FloatArray,
+                        support: npt.NDArray[np.int64], sums: FloatArray,
+                        counts: npt.NDArray[np.int64], params: FloatArray,
+                        modes: npt.NDArray[np.int64], top: int, index: npt.NDArray[np.int64],
+                        prob: FloatArray) -> tuple[int, int, int]:
+    """:meth:`EvolvingClusterer.learn_and_recognise` on its arrays (room for one more state):
+    :func:`_learn`, then :func:`~app.core.belief._recognise` on the states after it, into
+    ``index`` and ``prob``. Returns the update's kind, the state it touched and the belief's
+    size."""
+    counts[SAMPLES] += 1
+    n, d = counts[STATES], z.shape[0]
+    d2 = np.empty(n + 1)
+    kind, at, sigma, hit = _learn(
+        z, counts[SAMPLES], sums[:d], float(sums[d]), centres, stats[SQ_NORM], stats[POTENTIAL],
+        stats[RADIUS], support, stats[SCATTER], stats[VARIANCE], n, modes[2], params[0],
+        params[1], modes[0] == 1, modes[1], params[2], d2)
+    sums[d] = sigma
+    counts[CAPACITY_HITS] += hit
+    if kind == NEW:
+        n += 1
+        counts[STATES] = n
+    m = _recognise(d2[:n], stats[VARIANCE, :n], top, index, prob)
+    return kind, at, m
 
 
 @njit(cache=True)

@@ -18,12 +18,22 @@ from types import ModuleType
 import numpy as np
 from numba.core.registry import CPUDispatcher
 
-from app.core import _kernels, belief, clustering, lazy_tpm, local_risk, observation, risk
+from app.core import (
+    _kernels,
+    belief,
+    clustering,
+    flags,
+    lazy_tpm,
+    local_risk,
+    observation,
+    risk,
+    step,
+)
 from app.core.config import ShieldConfig
 from app.core.shield import Shield
 
-MODULES: tuple[ModuleType, ...] = (_kernels, observation, clustering, belief, lazy_tpm,
-                                   local_risk, risk)
+MODULES: tuple[ModuleType, ...] = (_kernels, observation, clustering, belief, flags, lazy_tpm,
+                                   local_risk, risk, step)
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from app.core import _stored as stored
 from app.core._arrays import ensure_capacity, read_only
@@ -18,10 +19,13 @@ from app.core.errors import InvalidSnapshot
 IntArray = npt.NDArray[np.int64]
 FlagMode = Literal["overwrite", "rate"]
 NO_FLAG = 0
+FLAG, VISITS, ENTRIES = range(3)  # the rows of StateFlags.table
 
 
 class StateFlags:
-    """The flag, the number of recognitions and entries and the failures of every state."""
+    """The flag, the number of recognitions and entries and the failures of every state:
+    ``table`` (flag, visits and entries, one row each, per state) and ``failures`` (states x
+    criteria), arrays a compiled step takes whole."""
 
     def __init__(self, mode: FlagMode, max_states: int, n_criteria: int,
                  min_rate: float) -> None:
@@ -29,27 +33,30 @@ class StateFlags:
         self.max_states = max_states
         self.min_rate = min_rate
         self._n = 0
-        self._flags = np.zeros(0, dtype=np.int64)
-        self._visits = np.zeros(0, dtype=np.int64)
-        self._entries = np.zeros(0, dtype=np.int64)
+        self.table = np.zeros((3, 0), dtype=np.int64)
         self._failures = np.zeros((0, n_criteria), dtype=np.int64)
         self._flagged: tuple[IntArray, IntArray] | None = None
 
     @property
     def flags(self) -> npt.NDArray[np.int64]:
         """Flag of every state (read-only)."""
-        return read_only(self._flags[: self._n])
+        return read_only(self.table[FLAG, : self._n])
 
     @property
     def visits(self) -> npt.NDArray[np.int64]:
         """How often each state was the recognised one (read-only view)."""
-        return read_only(self._visits[: self._n])
+        return read_only(self.table[VISITS, : self._n])
 
     @property
     def entries(self) -> npt.NDArray[np.int64]:
         """How often a stream came into each state from another one, or began there
         (read-only view)."""
-        return read_only(self._entries[: self._n])
+        return read_only(self.table[ENTRIES, : self._n])
+
+    def arrays(self) -> tuple[IntArray, IntArray]:
+        """What a compiled step counts in (:func:`observe`'s arrays); the same arrays until
+        a state is added."""
+        return self.table, self._failures
 
     @property
     def failures(self) -> npt.NDArray[np.int64]:
@@ -67,9 +74,7 @@ class StateFlags:
     def add_state(self) -> None:
         """A new state starts favourable and unvisited."""
         n = self._n
-        self._flags = ensure_capacity(self._flags, n + 1, self.max_states)
-        self._visits = ensure_capacity(self._visits, n + 1, self.max_states)
-        self._entries = ensure_capacity(self._entries, n + 1, self.max_states)
+        self.table = ensure_capacity(self.table, n + 1, self.max_states, axis=1)
         self._failures = ensure_capacity(self._failures, n + 1, self.max_states)
         self._n = n + 1
 
@@ -83,24 +88,13 @@ class StateFlags:
         covers much ordinary driving is not condemned by one failure at its edge, and one where
         cars wait for minutes per visit does not dilute the failures that end there.
         """
-        self._visits[state] += 1
-        if entered:
-            self._entries[state] += 1
-        if criterion is not None:
-            self._failures[state, criterion] += 1
-        old = int(self._flags[state])
-        if self.mode == "rate":  # a step without failure can lift a flag but never set one
-            new = self._rate_flag(state) if criterion is not None or old else NO_FLAG
-        else:
-            new = NO_FLAG if criterion is None else criterion + 1
-        if new != old:
-            self._flags[state] = new
-            self._flagged = None
+        if observe(self.table, self._failures, state, -1 if criterion is None else criterion,
+                   entered, self.mode == "rate", self.min_rate):
+            self.changed()
 
-    def _rate_flag(self, state: int) -> int:
-        failures = self._failures[state]
-        frequent = np.flatnonzero(failures >= max(1.0, self.min_rate * self._entries[state]))
-        return int(frequent[0]) + 1 if frequent.size else NO_FLAG
+    def changed(self) -> None:
+        """A flag changed (in :func:`observe`): the flagged states are found again."""
+        self._flagged = None
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state."""
@@ -114,12 +108,12 @@ class StateFlags:
         """Rebuild from :meth:`snapshot` output. Snapshots from before entries were counted
         lack them: they count from the restore on."""
         self = cls(mode, max_states, n_criteria, min_rate)
-        self._flags = stored.ints(data["flags"], "flags.flags", high=n_criteria).ravel()
-        n = self._n = self._flags.shape[0]
+        flags = stored.ints(data["flags"], "flags.flags", high=n_criteria).ravel()
+        n = self._n = flags.shape[0]
         if n > max_states:
             raise InvalidSnapshot(f"more than {max_states} states", field="flags.flags")
-        self._visits = stored.ints(data["visits"], "flags.visits", (n,))
-        self._entries = _counts(data.get("entries"), "flags.entries", n)
+        self.table = np.stack([flags, stored.ints(data["visits"], "flags.visits", (n,)),
+                               _counts(data.get("entries"), "flags.entries", n)])
         self._failures = stored.ints(data["failures"], "flags.failures", (n, n_criteria))
         return self
 
@@ -128,3 +122,28 @@ def _counts(data: Any, field: str, n: int) -> IntArray:
     if data is None:
         return np.zeros(n, dtype=np.int64)
     return stored.ints(data, field, (n,))
+
+
+@njit(cache=True)
+def observe(table: IntArray, failures: IntArray, state: int, criterion: int, entered: bool,
+            rate: bool, min_rate: float) -> bool:
+    """:meth:`StateFlags.observe` on its arrays (``criterion`` -1: none, ``rate``: the rate
+    mode); whether the state's flag changed."""
+    table[VISITS, state] += 1
+    if entered:
+        table[ENTRIES, state] += 1
+    if criterion >= 0:
+        failures[state, criterion] += 1
+    old = table[FLAG, state]
+    new = NO_FLAG
+    if rate:  # a step without failure can lift a flag but never set one
+        if criterion >= 0 or old != NO_FLAG:
+            least = max(1.0, min_rate * table[ENTRIES, state])
+            for c in range(failures.shape[1]):
+                if failures[state, c] >= least:
+                    new = c + 1
+                    break
+    elif criterion >= 0:
+        new = criterion + 1
+    table[FLAG, state] = new
+    return bool(new != old)

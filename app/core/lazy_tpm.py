@@ -57,28 +57,38 @@ class LazyTransitions:
         self._created = np.zeros((q, 0))  # lg_a(m) = -ld_a when state m appeared
         self._pad = np.zeros((q, 0))  # exp(lg_a(m) - lg_a(n-1)), prior mode
         self._pad_tail = np.zeros((q, 1))  # sum_{j >= m} pad_a(j), with a trailing 0
-        self._offset = np.zeros((q, 0))  # learned row i is exp(offset) * vals
-        self._row_sum = np.zeros((q, 0))  # sum of vals per row
-        self._nnz = np.zeros((q, 0), dtype=np.int64)
-        # Per row, kept so that neither learning nor prediction recomputes the row normaliser
-        # F_o of every belief state: log of the padding mass / D_a and of the padding level;
-        # then P^a(i, .) = learned_scale(i) * vals(i) + pad_scale(i) * padding(i)
-        self._log_pad = np.zeros((q, 0))
-        self._log_level = np.zeros((q, 0))
-        self._learned_scale = np.zeros((q, 0))
-        self._pad_scale = np.zeros((q, 0))
-        self._start = np.zeros((q, 0), dtype=np.int64)  # each row's run in the pool
-        self._cap = np.zeros((q, 0), dtype=np.int64)
+        # Per row (action x state), in one array each so that a compiled step takes them
+        # whole: the numbers (offset: learned row i is exp(offset) * vals; row_sum: the sum
+        # of vals; then, kept so that neither learning nor prediction recomputes the row
+        # normaliser F_o of every belief state, log of the padding mass / D_a and of the
+        # padding level, and P^a(i, .) = learned_scale(i) * vals(i) + pad_scale(i) *
+        # padding(i)) and the counts (entries, the row's run in the pool: start and room)
+        self._rows = np.zeros((6, q, 0))
+        self._row_counts = np.zeros((3, q, 0), dtype=np.int64)
+        self._views()
         self._pool_cols: ColArray = np.zeros(0, dtype=np.int32)
         self._pool_vals: FloatArray = np.zeros(0)
-        self._used = 0  # pool slots handed out to rows
+        self._used = np.zeros(1, dtype=np.int64)  # pool slots handed out to rows
         self._log_prior = math.log(config.prior)
         self._scratch = np.zeros(0, dtype=np.int64)  # see _learn
+
+    def _views(self) -> None:
+        """Name the rows of the per-row arrays (again after they grow)."""
+        (self._offset, self._row_sum, self._log_pad, self._log_level, self._learned_scale,
+         self._pad_scale) = self._rows
+        self._nnz, self._start, self._cap = self._row_counts
 
     @property
     def n_states(self) -> int:
         """Current matrix size n."""
         return self._n
+
+    def arrays(self) -> tuple[FloatArray, FloatArray, IntArray, ColArray, FloatArray, IntArray,
+                              IntArray]:
+        """What a compiled step learns a transition with (:func:`learn`'s arrays, in order);
+        the same arrays until a state is added or the pool is compacted."""
+        return (self._log_decay, self._rows, self._row_counts, self._pool_cols,
+                self._pool_vals, self._used, self._scratch)
 
     def add_state(self) -> None:
         """Expand every matrix by one state: the new pads are ``eps`` at today's scale."""
@@ -86,13 +96,11 @@ class LazyTransitions:
         self._created = ensure_capacity(self._created, n + 1, limit, axis=1)
         self._pad = ensure_capacity(self._pad, n + 1, limit, axis=1)
         self._pad_tail = ensure_capacity(self._pad_tail, n + 2, limit + 1, axis=1)
-        self._offset = ensure_capacity(self._offset, n + 1, limit, axis=1)
-        self._row_sum = ensure_capacity(self._row_sum, n + 1, limit, axis=1)
-        self._nnz = ensure_capacity(self._nnz, n + 1, limit, axis=1)
-        self._start = ensure_capacity(self._start, n + 1, limit, axis=1)
-        self._cap = ensure_capacity(self._cap, n + 1, limit, axis=1)
-        for name in ("_log_pad", "_log_level", "_learned_scale", "_pad_scale"):
-            setattr(self, name, ensure_capacity(getattr(self, name), n + 1, limit, axis=1))
+        self._rows = ensure_capacity(self._rows, n + 1, limit, axis=2)
+        self._row_counts = ensure_capacity(self._row_counts, n + 1, limit, axis=2)
+        self._views()
+        if self._scratch.shape[0] < n + 1:
+            self._scratch = np.zeros(limit, dtype=np.int64)
         self._created[:, n] = -self._log_decay
         self._offset[:, n] = -self._log_decay
         self._n = n + 1
@@ -133,21 +141,14 @@ class LazyTransitions:
         ``F <- (1 - phi) F + phi tau gamma^T`` becomes ``D <- (1 - phi) D`` and
         ``S += phi tau gamma^T / D``; touched rows are first re-based to the new scale.
         """
-        a = action_bin
-        if self._scratch.shape[0] < self._n:
-            self._scratch = np.zeros(self.max_states, dtype=np.int64)
         while True:
-            used = _learn(a, self.config.learning_rate, prev.index, prev.prob, belief.index,
-                          belief.prob, self._log_decay, self._offset, self._row_sum, self._nnz,
-                          self._start, self._cap, self._log_pad, self._log_level,
-                          self._learned_scale, self._pad_scale, self._pool_cols,
-                          self._pool_vals, self._used, self._scratch)
-            if used >= 0:
-                self._used = used
+            needed = learn(action_bin, self.config.learning_rate, prev.index, prev.prob,
+                           belief.index, belief.prob, *self.arrays())
+            if not needed:
                 return
-            self._compact(-used)
+            self.compact(needed)
 
-    def _compact(self, extra: int) -> None:
+    def compact(self, extra: int) -> None:
         """Move every row, in action and state order, into a pool of twice the live room
         plus ``extra`` (rows keep their room)."""
         n = self._n
@@ -155,8 +156,8 @@ class LazyTransitions:
         size = max(2 * (live + extra), 64)
         cols = np.zeros(size, dtype=np.int32)
         vals = np.zeros(size)
-        self._used = _compact(self._start[:, :n], self._cap[:, :n], self._nnz[:, :n],
-                              self._pool_cols, self._pool_vals, cols, vals)
+        self._used[0] = _compact(self._start[:, :n], self._cap[:, :n], self._nnz[:, :n],
+                                 self._pool_cols, self._pool_vals, cols, vals)
         self._pool_cols, self._pool_vals = cols, vals
 
     def _entries(self, a: int) -> tuple[IntArray, ColArray, FloatArray]:
@@ -289,9 +290,8 @@ class LazyTransitions:
     def nbytes(self) -> int:
         """Memory held by the matrices."""
         arrays: list[npt.NDArray[Any]] = [
-            self._created, self._pad, self._pad_tail, self._offset, self._row_sum, self._nnz,
-            self._log_pad, self._log_level, self._learned_scale, self._pad_scale,
-            self._scratch, self._start, self._cap, self._pool_cols, self._pool_vals,
+            self._created, self._pad, self._pad_tail, self._rows, self._row_counts,
+            self._scratch, self._pool_cols, self._pool_vals,
         ]
         return sum(int(x.nbytes) for x in arrays)
 
@@ -334,12 +334,10 @@ class LazyTransitions:
         self._created = stored.floats(data["created"], "transitions.created", (q, n))
         self._pad = np.zeros((q, n))
         self._pad_tail = np.zeros((q, n + 1))
-        self._offset = np.zeros((q, n))
-        self._row_sum = np.zeros((q, n))
-        self._nnz = np.zeros((q, n), dtype=np.int64)
-        self._cap = np.zeros((q, n), dtype=np.int64)
-        for name in ("_log_pad", "_log_level", "_learned_scale", "_pad_scale"):
-            setattr(self, name, np.zeros((q, n)))
+        self._rows = np.zeros((6, q, n))
+        self._row_counts = np.zeros((3, q, n), dtype=np.int64)
+        self._views()
+        self._scratch = np.zeros(max_states, dtype=np.int64)
         entries = data["actions"]
         pool_cols: list[ColArray] = []
         pool_vals: list[FloatArray] = []
@@ -366,8 +364,8 @@ class LazyTransitions:
             pool_vals.append(vals)
         self._pool_cols = np.concatenate([np.zeros(0, dtype=np.int32), *pool_cols])
         self._pool_vals = np.concatenate([np.zeros(0), *pool_vals])
-        self._used = self._pool_vals.size
-        self._start = (np.cumsum(self._cap.ravel()) - self._cap.ravel()).reshape(q, n)
+        self._used[0] = self._pool_vals.size
+        self._start[:] = (np.cumsum(self._cap.ravel()) - self._cap.ravel()).reshape(q, n)
         self._refresh()
         return self
 
@@ -397,19 +395,20 @@ def _suffix_sums(x: FloatArray) -> FloatArray:
 
 
 @njit(cache=True)
-def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
-           gamma: FloatArray, log_decay: FloatArray, offset: FloatArray, row_sum: FloatArray,
-           nnz: IntArray, start: IntArray, cap: IntArray, log_pad: FloatArray,
-           log_level: FloatArray, learned_scale: FloatArray, pad_scale: FloatArray,
-           pool_cols: ColArray, pool_vals: FloatArray, used: int, slots: IntArray) -> int:
-    """:meth:`LazyTransitions.learn_one` on action ``a``'s rows (the per-row arrays are
-    actions x states). Returns the pool slots in use after it, or, changing nothing, minus
-    the slots it needs at the pool's end when the rows that must move there (to twice their
-    room) do not fit.
+def learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
+          gamma: FloatArray, log_decay: FloatArray, numbers: FloatArray, counts: IntArray,
+          pool_cols: ColArray, pool_vals: FloatArray, used: IntArray, slots: IntArray) -> int:
+    """:meth:`LazyTransitions.learn_one` on action ``a``'s rows (``numbers`` and ``counts``
+    are the per-row arrays, :meth:`LazyTransitions.arrays`). Returns 0, or, changing
+    nothing, the slots it needs at the pool's end when the rows that must move there (to
+    twice their room) do not fit.
 
     ``slots`` is a zeroed scratch map column -> slot + 1, filled for one row at a time and
     cleared again, so that finding the entries costs O(k W) whatever n is.
     """
+    offset, row_sum, log_pad, log_level, learned_scale, pad_scale = (
+        numbers[0], numbers[1], numbers[2], numbers[3], numbers[4], numbers[5])
+    nnz, start, cap = counts[0], counts[1], counts[2]
     extra = 0
     for i in range(rows.shape[0]):  # first, without changing anything: is there room?
         row = rows[i]
@@ -417,8 +416,9 @@ def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
             needed = _row_needs(nnz[a, row], start[a, row], cols, pool_cols, slots)
             if needed > cap[a, row]:
                 extra += max(needed, 2 * cap[a, row], 4)
-    if used + extra > pool_vals.shape[0]:
-        return -extra
+    top = used[0]
+    if top + extra > pool_vals.shape[0]:
+        return extra
     if extra:
         for i in range(rows.shape[0]):  # rows without room move to the end, in order
             row = rows[i]
@@ -427,10 +427,11 @@ def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
                 if needed > cap[a, row]:
                     room = max(needed, 2 * cap[a, row], 4)
                     for s in range(nnz[a, row]):
-                        pool_cols[used + s] = pool_cols[start[a, row] + s]
-                        pool_vals[used + s] = pool_vals[start[a, row] + s]
-                    start[a, row], cap[a, row] = used, room
-                    used += room
+                        pool_cols[top + s] = pool_cols[start[a, row] + s]
+                        pool_vals[top + s] = pool_vals[start[a, row] + s]
+                    start[a, row], cap[a, row] = top, room
+                    top += room
+        used[0] = top
     step = log_decay[a] + math.log1p(-lr)
     log_decay[a] = step
     base = -step  # the touched rows' new offset
@@ -461,7 +462,7 @@ def _learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
         for s in range(first, first + nnz[a, row]):
             slots[pool_cols[s]] = 0
         nnz[a, row] = count
-    return used
+    return 0
 
 
 @njit(cache=True)

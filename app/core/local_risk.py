@@ -128,10 +128,16 @@ class LocalRisk:
         ``action_bin`` applied) ended in ``failure`` (a criterion index) or not; ``ended``
         closes its episode. One compiled call."""
         self.reserve(slot)
-        _learn(self._theta, self._cov, self._tried, self._low, self._high, self.midpoints,
-               self._queue_index, self._queue_prob, self._queue_phi, self._queue_ends,
-               self.failures, slot, belief.index, belief.prob, z, action_bin,
-               -1 if failure is None else failure, ended, self.horizon)
+        learn_step(*self.arrays(), slot, belief.index, belief.prob, z, action_bin,
+                   -1 if failure is None else failure, ended, self.horizon)
+
+    def arrays(self) -> tuple[FloatArray, FloatArray, IntArray, FloatArray, FloatArray,
+                              FloatArray, IntArray, FloatArray, FloatArray, IntArray, IntArray]:
+        """What a compiled step learns and decides with (:func:`learn_step`'s arrays, in
+        order); the same arrays until a state is added or a new slot reserved."""
+        return (self._theta, self._cov, self._tried, self._low, self._high, self.midpoints,
+                self._queue_index, self._queue_prob, self._queue_phi, self._queue_ends,
+                self.failures)
 
     def pending(self, slot: int) -> int:
         """How many steps of the stream in ``slot`` await their labels."""
@@ -161,9 +167,9 @@ class LocalRisk:
         """The risk reviser's decision on a proposal at ``z`` (:func:`app.core.risk.decide`):
         ``by_bin`` gets each action's risk (:meth:`read`, then the monotone prior) and
         ``verdicts`` each bin's verdict; one compiled call."""
-        return _decide(self._theta, self._tried, self._low, self._high, belief.index,
-                       belief.prob, z, self.midpoints, safe, proposed_bin, threshold, margin,
-                       by_bin, verdicts)
+        return decide_step(self._theta, self._tried, self._low, self._high, belief.index,
+                           belief.prob, z, self.midpoints, safe, proposed_bin, threshold,
+                           margin, by_bin, verdicts)
 
     def snapshot(self, slots: Mapping[str, int]) -> dict[str, Any]:
         """Exact state as arrays: the weights, their covariances, the bins' boxes and the
@@ -230,6 +236,8 @@ class LocalRisk:
 
     def _restore_pending(self, n_states: int, slots: Mapping[str, int],
                          data: dict[str, Any]) -> None:
+        if slots:
+            self.reserve(max(slots.values()))
         names = data["streams"]
         if not isinstance(names, list) or not all(isinstance(s, str) for s in names):
             raise InvalidSnapshot("pending streams must be names", field="local_risk.streams")
@@ -261,7 +269,7 @@ class LocalRisk:
 
 
 @njit(cache=True)
-def _learn(theta: FloatArray, cov: FloatArray, tried: IntArray, low: FloatArray,
+def learn_step(theta: FloatArray, cov: FloatArray, tried: IntArray, low: FloatArray,
            high: FloatArray, midpoints: FloatArray, queue_index: IntArray,
            queue_prob: FloatArray, queue_phi: FloatArray, queue_ends: IntArray,
            failures: IntArray, slot: int, index: IntArray, prob: FloatArray, z: FloatArray,
@@ -377,11 +385,12 @@ def _read(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
 
 
 @njit(cache=True)
-def _decide(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
+def decide_step(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
             index: IntArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
             safe: IntArray, proposed_bin: int, threshold: float, margin: float,
             by_bin: FloatArray, verdicts: IntArray) -> tuple[float, int, int, bool]:
-    """:meth:`LocalRisk.decide`: :func:`_read`, the monotone prior and the decision."""
+    """:meth:`LocalRisk.decide` on its arrays: :func:`_read`, the monotone prior and the
+    decision."""
     _read(theta, tried, low, high, index, prob, z, midpoints, safe, by_bin)
     risk.monotone(by_bin, safe)
     return risk.decide(by_bin, proposed_bin, threshold, margin, safe, verdicts)

@@ -25,36 +25,36 @@ class ObservationSpace:
     def __init__(self, spec: ObservationSpec) -> None:
         self.dim = dim = spec.size
         features = spec.features
-        self._raw = spec.cluster_raw
-        self.size = dim * self._raw + len(features)  # dimensions of the clustering space
-        self._weights = np.array([f.weights for f in features], dtype=np.float64).reshape(-1, dim)
-        self._divide_by = np.array([f.divide_by or (0.0,) * dim for f in features],
-                                   dtype=np.float64).reshape(-1, dim)
-        self._ratio = np.array([bool(f.divide_by) for f in features], dtype=np.bool_)
-        self._floor = np.array([f.floor for f in features], dtype=np.float64)
+        self.raw = spec.cluster_raw
+        self.size = dim * self.raw + len(features)  # dimensions of the clustering space
         self._feature_low = np.array([f.low for f in features], dtype=np.float64)
         self._feature_range = np.array([f.high - f.low for f in features], dtype=np.float64)
+        # per feature: weights (dim), divide_by (dim), whether a ratio, floor, low, range
+        self.features = np.array(
+            [[*f.weights, *(f.divide_by or (0.0,) * dim), bool(f.divide_by), f.floor, f.low,
+              f.high - f.low] for f in features], dtype=np.float64).reshape(-1, 2 * dim + 4)
         knee = np.array(spec.knee or [0.0] * dim, dtype=np.float64)
         self._curved: BoolArray = knee > 0  # the dimensions with a knee
         self._knee = np.where(self._curved, knee, 1.0)
         low, high = np.array(spec.low, dtype=np.float64), np.array(spec.high, dtype=np.float64)
         self._low = low + np.where(self._curved, np.clip(low, -self._knee, self._knee), 0.0)
         self._range: FloatArray = high - low
+        # per dimension: whether it has a knee, the knee, the (warped) low end, the range
+        self.scales = np.stack([self._curved.astype(np.float64), self._knee, self._low,
+                                self._range])
 
     def normalise(self, observation: FloatArray) -> FloatArray:
         """Physical units (a float64 vector) to the clustering space."""
         z = np.empty(self.size)
-        _normalise(observation, self._raw, self._curved, self._knee, self._low, self._range,
-                   self._weights, self._divide_by, self._ratio, self._floor,
-                   self._feature_low, self._feature_range, z)
+        normalise(observation, self.raw, self.scales, self.features, z)
         return z
 
     def physical(self, z: FloatArray) -> FloatArray:
         """The clustering space back to physical units: the observation (the inverse of
         :meth:`normalise`) where it is clustered, then each feature's value."""
-        n_raw = self.dim if self._raw else 0
+        n_raw = self.dim if self.raw else 0
         features = self._feature_low + z[..., n_raw:] * self._feature_range
-        if not self._raw:
+        if not self.raw:
             return features
         warped = self._low + z[..., :n_raw] * self._range
         k = self._knee
@@ -65,28 +65,29 @@ class ObservationSpace:
 
 
 @njit(cache=True)
-def _normalise(x: FloatArray, raw: bool, curved: BoolArray, knee: FloatArray, low: FloatArray,
-               scale: FloatArray, weights: FloatArray, divide_by: FloatArray,
-               ratio: BoolArray, floor: FloatArray, feature_low: FloatArray,
-               feature_range: FloatArray, out: FloatArray) -> None:
-    at = 0
+def normalise(x: FloatArray, raw: bool, scales: FloatArray, features: FloatArray,
+              out: FloatArray) -> None:
+    """:meth:`ObservationSpace.normalise` into ``out``, on its packed ``scales`` and
+    ``features``."""
+    at, d = 0, x.shape[0]
     if raw:
-        for i in range(x.shape[0]):
+        for i in range(d):
             value = x[i]
-            if curved[i]:
-                value += min(max(value, -knee[i]), knee[i])
-            out[i] = (value - low[i]) / scale[i]
-        at = x.shape[0]
-    for f in range(weights.shape[0]):
+            if scales[0, i] > 0.0:
+                value += min(max(value, -scales[1, i]), scales[1, i])
+            out[i] = (value - scales[2, i]) / scales[3, i]
+        at = d
+    for f in range(features.shape[0]):
         value = 0.0
-        for i in range(x.shape[0]):
-            value += weights[f, i] * x[i]
-        if ratio[f]:
+        for i in range(d):
+            value += features[f, i] * x[i]
+        if features[f, 2 * d] > 0.0:
             divisor = 0.0
-            for i in range(x.shape[0]):
-                divisor += divide_by[f, i] * x[i]
-            value /= max(divisor, floor[f])
-        out[at + f] = min(max((value - feature_low[f]) / feature_range[f], 0.0), 1.0)
+            for i in range(d):
+                divisor += features[f, d + i] * x[i]
+            value /= max(divisor, features[f, 2 * d + 1])
+        low, width = features[f, 2 * d + 2], features[f, 2 * d + 3]
+        out[at + f] = min(max((value - low) / width, 0.0), 1.0)
 
 
 @njit(cache=True)

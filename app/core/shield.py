@@ -20,8 +20,8 @@ import numpy.typing as npt
 from app.core import _stored as stored
 from app.core import actions, reviser, risk
 from app.core.belief import Belief, recognise
-from app.core.clustering import EvolvingClusterer
-from app.core.config import ActionSpec, ShieldConfig
+from app.core.clustering import NEW, REPLACED, EvolvingClusterer
+from app.core.config import ActionSpec, ShieldConfig, TransitionConfig
 from app.core.errors import (
     InvalidAction,
     InvalidConfig,
@@ -35,6 +35,7 @@ from app.core.lazy_tpm import LazyTransitions
 from app.core.local_risk import LocalRisk
 from app.core.observation import ObservationSpace
 from app.core.observation import check as check_observation
+from app.core.step import learn_and_decide, observe
 from app.core.tpm import DenseTransitions, TransitionModel
 
 FloatArray = npt.NDArray[np.float64]
@@ -42,6 +43,14 @@ SNAPSHOT_FORMAT = 4
 # Observations beyond this magnitude are refused: their squares (distances, potentials) would
 # overflow float64 long before they could mean anything physical.
 MAX_MAGNITUDE = 1e12
+# What the compiled step is given in place of a part the configuration lacks (the dense TPM,
+# the paper's reviser): empty arrays of the types it expects, never read.
+_NO_TRANSITIONS = LazyTransitions(1, TransitionConfig(), 1).arrays()
+_NO_RISK = LocalRisk(1, 1, 1, 1, 1, 1, 1).arrays()
+_NO_INDEX = np.zeros(0, dtype=np.int64)
+_NO_FLOATS = np.zeros(0)
+_NO_VERDICTS = np.zeros(0, dtype=np.int64)
+_NO_RISKS = np.zeros((0, 0))
 
 
 @dataclass(slots=True)
@@ -159,6 +168,7 @@ class StepInput:
     event: int | None
     done: bool
     applied_action: float | None
+    applied_bin: int  # the applied action's bin (-1 without one)
     learn: bool
     shadow: bool
 
@@ -204,8 +214,9 @@ class Shield:
         self._safe_steps = risk.safe_steps(self._directions)
         self._names = tuple(c.name for c in cfg.criteria)
         # the reviser's decision on a proposal: the risk reviser's (the default) or the paper's
-        self._decide = (self._decide_by_risk if cfg.reviser.method == "risk"
-                        else self._decide_by_flags)
+        self._by_risk = cfg.reviser.method == "risk"
+        self._decide = self._decide_by_risk if self._by_risk else self._decide_by_flags
+        self._top_k = cfg.limits.belief_top_k
         # the paper's a_max bounds a range symmetric about 0: the half-width, so that the
         # revision noise follows the width of any range, not where it lies
         self._a_max = (cfg.action.high - cfg.action.low) / 2
@@ -322,6 +333,8 @@ class Shield:
         if action is None and not done:
             raise InvalidAction("action is required unless done is true", field="action")
         checked = None if action is None else self._check_action(action, "action")
+        applied = (None if applied_action is None
+                   else self._check_action(applied_action, "applied_action"))
         return StepInput(
             observation=z,
             action=checked,
@@ -329,10 +342,8 @@ class Shield:
             stream=stream,
             event=criterion,
             done=bool(done),
-            applied_action=(
-                None if applied_action is None
-                else self._check_action(applied_action, "applied_action")
-            ),
+            applied_action=applied,
+            applied_bin=-1 if applied is None else actions.encode(applied, self.config.action),
             learn=bool(learn),
             shadow=bool(shadow),
         )
@@ -353,38 +364,54 @@ class Shield:
         return value
 
     def apply(self, step: StepInput) -> Decision:
-        """Carry out a validated step."""
+        """Carry out a validated step: two compiled calls (:mod:`app.core.step`) around what
+        only Python does (a new state grows every per-state table)."""
         if not step.learn:
             return self._what_if(step)
         cfg = self.config
-        z = self.normalise(step.observation)
+        clusterer = self.clusterer
+        clusterer.make_room()
+        size = min(clusterer.n_states + 1, self._top_k)
+        z = np.empty(self.space.size)
+        index = np.empty(size, dtype=np.int64)
+        prob = np.empty(size)
         # clustering, then Eq. 1 recognition on the states after it
-        update, belief = self.clusterer.learn_and_recognise(z, cfg.limits.belief_top_k)
-        if update.is_new:  # a new state expands every TPM
+        space = self.space
+        kind, at, m, recognised = observe(step.observation, space.raw, space.scales,
+                                          space.features, z, *clusterer.arrays(), self._top_k,
+                                          index, prob)
+        is_new = kind == NEW
+        if is_new:  # a new state expands every TPM
             self._add_state()
-        elif update.kind == "replaced" and cfg.transitions.on_replace == "reset":
-            self.transitions.reset_row(update.index)  # A16
-        # Eqs. 3-4 for the stream's previous step, under the action behind the transition
+        elif kind == REPLACED and cfg.transitions.on_replace == "reset":
+            self.transitions.reset_row(at)  # A16
+        belief = Belief(index[:m], prob[:m])
         state = self._stream(step.stream)
-        self._learn_transition(state, belief, update.is_new, step.applied_action)
-        # flags on the recognised state
-        recognised = belief.argmax()
-        self._learn_outcome(state, step)
-        self.flags.observe(recognised, step.event, state.recognised != recognised)
+        decide = self._by_risk and not step.done
+        by_bin, verdicts = _NO_RISKS, _NO_VERDICTS
+        if decide:
+            by_bin = np.empty((cfg.action.n_bins, len(self._names)))
+            verdicts = np.empty(cfg.action.n_bins, dtype=np.int64)
+        decided, limit, worst, final, kept = self._learn(step, state, belief, z, recognised,
+                                                         is_new, decide, by_bin, verdicts)
         self.counters.steps += 1
         self.counters.model_version += 1
 
         if step.done:
             self.counters.episodes += 1
-            closing = self._closing(step, recognised, update.is_new, state.step)
+            closing = self._closing(step, recognised, is_new, state.step)
             if cfg.transitions.across_episodes:  # A13 literal: the next reset is learned
                 state.belief, state.recognised, state.step, state.z = belief, recognised, 0, z
             else:
                 self._end_stream(step.stream)
             return closing
 
-        decision = self._decide(step, z, belief, recognised, update.is_new, state.step,
-                                self._rng)
+        if self._by_risk:
+            decision = self._risk_decision(step, by_bin, verdicts, decided, limit, worst,
+                                           final, kept, recognised, is_new, state.step)
+        else:
+            decision = self._decide_by_flags(step, z, belief, recognised, is_new, state.step,
+                                             self._rng)
         assert decision.action is not None and step.action is not None
         state.belief, state.recognised, state.z = belief, recognised, z
         state.proposed_bin = step.action_bin
@@ -394,6 +421,66 @@ class Shield:
         if decision.revised and not decision.shadow:
             self.counters.interventions[decision.verdict] += 1
         return decision
+
+    def _learn(self, step: StepInput, state: StreamState, belief: Belief, z: FloatArray,
+               recognised: int, is_new: bool, decide: bool, by_bin: FloatArray,
+               verdicts: npt.NDArray[np.int64]) -> tuple[bool, float, int, int, bool]:
+        """What the step learns from the stream's previous one (Eqs. 3-4 under the action
+        behind the transition; the risk label of the action applied, :mod:`app.core.local_risk`,
+        the risk reviser's only) and the flags of the recognised state, then, if ``decide``,
+        the risk reviser's decision: whether it decided (a failure was learned), and the
+        decision (:func:`app.core.risk.decide`)."""
+        prev = state.belief
+        transition_bin = self._transition_bin(state, is_new, step.applied_bin)
+        risk_bin = -1
+        if prev is not None and state.z is not None and self.local_risk is not None:
+            # (a stream restored from a snapshot of the paper's reviser lacks z)
+            risk_bin = state.applied_bin if step.applied_bin < 0 else step.applied_bin
+        cfg = self.config
+        local = self.local_risk
+        tpm = self.transitions
+        lazy = isinstance(tpm, LazyTransitions)
+        model = _NO_RISK if local is None else local.arrays()
+        while True:
+            transitions = tpm.arrays() if isinstance(tpm, LazyTransitions) else _NO_TRANSITIONS
+            fixed = (cfg.transitions.learning_rate, *transitions, cfg.risk.horizon, *model,
+                     *self.flags.arrays(), cfg.reviser.flags == "rate",
+                     cfg.reviser.flag_min_rate, self._safe_steps, cfg.risk.threshold,
+                     cfg.risk.margin)
+            needed, changed, decided, limit, worst, final, kept = learn_and_decide(
+                *fixed,
+                _NO_INDEX if prev is None else prev.index,
+                _NO_FLOATS if prev is None else prev.prob,
+                _NO_FLOATS if state.z is None else state.z, belief.index, belief.prob, z,
+                recognised, state.recognised != recognised,
+                -1 if step.event is None else step.event, step.done, state.slot,
+                transition_bin if lazy else -1, risk_bin, decide, step.action_bin, by_bin,
+                verdicts)
+            if not needed:
+                break
+            assert isinstance(tpm, LazyTransitions)
+            tpm.compact(needed)
+        if not lazy and transition_bin >= 0:
+            assert prev is not None
+            self.transitions.learn_one(prev, transition_bin, belief)
+        if changed:
+            self.flags.changed()
+        return decided, limit, worst, final, kept
+
+    def _transition_bin(self, state: StreamState, is_new: bool, applied_bin: int) -> int:
+        """The action behind the stream's transition into this step, or -1 when none is
+        learned."""
+        cfg = self.config.transitions
+        if state.belief is None:
+            return -1  # first step of an episode: no tau (A13)
+        if is_new and cfg.on_new_state == "skip":
+            return -1  # A3 (a): tau and gamma have different sizes
+        # (A3 (b) pads tau with a 0 for the new state: implicit in the sparse belief)
+        if applied_bin >= 0:
+            return applied_bin
+        if cfg.action_source == "executed":  # A8
+            return state.applied_bin
+        return state.proposed_bin  # A8 literal: the controller's proposal
 
     def _stream(self, name: str) -> StreamState:
         """The stream's state, now its most recent; a new stream beyond ``max_streams``
@@ -409,8 +496,11 @@ class Shield:
 
     def _new_slot(self) -> int:
         """A free slot in the tables kept per stream: one a stream left, else the next."""
-        return self._free_slots.pop() if self._free_slots else (
+        slot = self._free_slots.pop() if self._free_slots else (
             len(self.streams) + len(self._free_slots))
+        if self.local_risk is not None:
+            self.local_risk.reserve(slot)
+        return slot
 
     def _end_stream(self, name: str) -> None:
         """Forget a stream (its episode ended, or it expired); its slot is free again."""
@@ -425,35 +515,6 @@ class Shield:
         self.flags.add_state()
         if self.local_risk is not None:
             self.local_risk.add_state()
-
-    def _learn_outcome(self, state: StreamState, step: StepInput) -> None:
-        """Queue the stream's previous step, under the action applied, for its label: the
-        failure of this step's event, if any, or none once ``horizon`` steps pass safely
-        (:mod:`app.core.local_risk`). Only the risk reviser reads it, so the paper's learns
-        nothing here."""
-        if state.belief is None or state.z is None or self.local_risk is None:
-            return  # (a stream restored from a snapshot of the paper's reviser lacks z)
-        action_bin = (state.applied_bin if step.applied_action is None
-                      else actions.encode(step.applied_action, self.config.action))
-        self.local_risk.learn(state.slot, state.belief, state.z, action_bin, step.event,
-                              step.done)
-
-    def _learn_transition(
-        self, state: StreamState, belief: Belief, is_new: bool, applied: float | None
-    ) -> None:
-        cfg = self.config.transitions
-        if state.belief is None:
-            return  # first step of an episode: no tau (A13)
-        if is_new and cfg.on_new_state == "skip":
-            return  # A3 (a): tau and gamma have different sizes
-        if applied is not None:
-            action_bin = actions.encode(applied, self.config.action)
-        elif cfg.action_source == "executed":  # A8
-            action_bin = state.applied_bin
-        else:  # A8 literal: the controller's proposal
-            action_bin = state.proposed_bin
-        # A3 (b) pads tau with a 0 for the new state: implicit in the sparse belief
-        self.transitions.learn_one(state.belief, action_bin, belief)
 
     def _what_if(self, step: StepInput) -> Decision:
         """``learn=False``: answer from the model as it is, changing nothing (noise included)."""
@@ -558,10 +619,29 @@ class Shield:
     def _decide_by_risk(self, step: StepInput, z: FloatArray, belief: Belief,
                         recognised: int, is_new: bool, index: int, rng: np.random.Generator
                         ) -> Decision:
-        """The risk reviser (:mod:`app.core.local_risk`, :mod:`app.core.risk`): keep the
-        proposal unless its risk is over the threshold and beyond the margin of the safest
-        action; then the nearest allowed (at its midpoint: no noise, so ``rng`` is not drawn
-        from)."""
+        """The risk reviser on a step that learns nothing (``learn=False``; a step that
+        learns decides in its compiled call, :meth:`_learn`). No noise: ``rng`` is not drawn
+        from."""
+        local = self.local_risk
+        assert local is not None
+        q = self.config.action.n_bins
+        by_bin = np.empty((q, len(self._names)))
+        verdicts = np.empty(q, dtype=np.int64)
+        decided = local.any_failure
+        limit, worst, final, kept = local.decide(
+            belief, z, step.action_bin, self.config.risk.threshold, self.config.risk.margin,
+            self._safe_steps, by_bin, verdicts) if decided else (0.0, 0, 0, False)
+        return self._risk_decision(step, by_bin, verdicts, decided, limit, worst, final, kept,
+                                   recognised, is_new, index)
+
+    def _risk_decision(self, step: StepInput, by_bin: FloatArray,
+                       verdicts: npt.NDArray[np.int64], decided: bool, limit: float,
+                       worst: int, final: int, kept: bool, recognised: int, is_new: bool,
+                       index: int) -> Decision:
+        """The risk reviser's decision record (:mod:`app.core.local_risk`,
+        :mod:`app.core.risk`): the proposal kept unless its risk is over the threshold and
+        beyond the margin of the safest action's; then the nearest allowed bin, at its
+        midpoint. Before any failure was learned (not ``decided``): a cold start."""
         cfg = self.config
         proposed = step.action
         assert proposed is not None
@@ -569,17 +649,12 @@ class Shield:
         action = suggested = proposed
         candidates: Sequence[Candidate] = ()
         revised = False
-        local = self.local_risk
-        assert local is not None
-        if not local.any_failure:
-            risks, limit, verdict, reason = self._risk(None), None, "ok", "cold_start"
+        threshold: float | None = None
+        if not decided:
+            risks, verdict, reason = self._risk(None), "ok", "cold_start"
         else:
             start = step.action_bin
-            by_bin = np.empty((cfg.action.n_bins, len(names)))
-            verdicts = np.empty(cfg.action.n_bins, dtype=np.int64)
-            limit, worst, final, kept = local.decide(
-                belief, z, start, cfg.risk.threshold, cfg.risk.margin, self._safe_steps,
-                by_bin, verdicts)
+            threshold = limit
             risks = dict(zip(names, by_bin[start].tolist(), strict=True))
             verdict = "ok" if kept else names[worst]
             if self.counters.episodes < cfg.reviser.activate_after_episodes:
@@ -596,8 +671,8 @@ class Shield:
                 revised = True
         return Decision(
             action=action, proposed=proposed, revised=revised,
-            reason=reason, verdict=verdict, risk=risks, threshold=limit, candidates=candidates,
-            state=recognised, n_states=self.n_states, new_state=is_new,
+            reason=reason, verdict=verdict, risk=risks, threshold=threshold,
+            candidates=candidates, state=recognised, n_states=self.n_states, new_state=is_new,
             episode=self.counters.episodes, step=index,
             model_version=self.counters.model_version, stream=step.stream, shadow=step.shadow,
             suggested=suggested,

@@ -32,7 +32,7 @@ def test_hand_computed_stream() -> None:
     third = c.learn_one(np.array([1.0]))
     assert (third.kind, third.index) == ("new", 1)
     assert c.potentials == pytest.approx([2 * (1 / 1.01) / (1 + (1 / 1.01) * 2), 2 / 3.81])
-    assert third.sq_distances == pytest.approx([1.0, 0.0])
+    assert c.sq_distances(np.array([1.0])) == pytest.approx([1.0, 0.0])
 
 
 def test_recursive_potentials_equal_the_direct_formula() -> None:

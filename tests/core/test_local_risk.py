@@ -195,6 +195,25 @@ def test_a_model_with_pending_steps_round_trips_and_decides_alike() -> None:
     assert_same(again.snapshot()["local_risk"], twin.snapshot()["local_risk"])
 
 
+def test_a_stream_that_ends_frees_its_slot_and_the_next_stream_starts_empty() -> None:
+    shield = Shield(ShieldConfig.from_dict(LOCAL))
+    crash_world(shield, 5, seed=7)
+    assert shield.local_risk is not None
+    for t in range(3):
+        shield.step([12.0 + t, 30.0, 11.0], 0.5, stream="a")
+        shield.step([20.0, 40.0 + t, 19.0], -0.5, stream="b")
+    slot_a, slot_b = shield.streams["a"].slot, shield.streams["b"].slot
+    assert slot_a != slot_b and shield.local_risk.pending(slot_a) == 2
+    shield.step([15.0, 30.0, 11.0], None, stream="a", done=True)
+    assert shield.local_risk.pending(slot_a) == 0  # labelled at the episode's end
+    shield.step([12.0, 30.0, 11.0], 0.5, stream="c")
+    shield.step([13.0, 30.0, 11.0], 0.5, stream="c")
+    assert shield.streams["c"].slot == slot_a and shield.local_risk.pending(slot_a) == 1
+    assert shield.local_risk.pending(slot_b) == 2  # b's steps are its own
+    copy = Shield.from_snapshot(shield.snapshot())
+    assert_same(copy.snapshot(), shield.snapshot())
+
+
 @pytest.mark.parametrize(("damage", "field"), [
     ("theta", "local_risk.theta"),
     ("tried", "local_risk.tried"),
@@ -202,6 +221,7 @@ def test_a_model_with_pending_steps_round_trips_and_decides_alike() -> None:
     ("lengths", "local_risk.lengths"),
     ("index", "local_risk.index"),
     ("stream", "local_risk.streams"),
+    ("twice", "local_risk.streams"),
 ])
 def test_a_damaged_local_model_is_refused_naming_its_part(damage: str, field: str) -> None:
     shield = Shield(ShieldConfig.from_dict(LOCAL))
@@ -220,6 +240,10 @@ def test_a_damaged_local_model_is_refused_naming_its_part(damage: str, field: st
         local["lengths"] = local["lengths"] + 10
     elif damage == "index":
         local["index"] = local["index"] + 10_000
+    elif damage == "twice":  # one stream's steps listed twice: more than its ring holds
+        for key in ("streams", "lengths", "sizes", "index", "prob", "phi"):
+            value = local[key]
+            local[key] = value * 2 if isinstance(value, list) else np.concatenate([value] * 2)
     else:
         local["streams"] = ["nobody"]
     with pytest.raises(InvalidSnapshot) as error:
