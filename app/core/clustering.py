@@ -71,6 +71,7 @@ class EvolvingClusterer:
         self.centres_t = np.zeros((dim, 0))
         self.stats = np.zeros((5, 0))
         self.support_counts = np.zeros(0, dtype=np.int64)
+        self._arrays: tuple[Any, ...] | None = None  # see arrays
 
     @property
     def k(self) -> int:
@@ -139,9 +140,11 @@ class EvolvingClusterer:
     def arrays(self) -> tuple[FloatArray, FloatArray, npt.NDArray[np.int64], FloatArray,
                               npt.NDArray[np.int64], FloatArray, npt.NDArray[np.int64]]:
         """What a compiled step clusters with (:func:`learn_and_recognise`'s arrays, in
-        order); the same arrays until :meth:`make_room` replaces them."""
-        return (self.centres_t, self.stats, self.support_counts, self.sums, self.counts,
-                self.params, self.modes)
+        order): the same tuple until :meth:`make_room` replaces them."""
+        if self._arrays is None:
+            self._arrays = (self.centres_t, self.stats, self.support_counts, self.sums,
+                            self.counts, self.params, self.modes)
+        return self._arrays
 
     def make_room(self) -> bool:
         """Room for one more state (whether the arrays were replaced to make it)."""
@@ -152,6 +155,7 @@ class EvolvingClusterer:
         self.centres_t = ensure_capacity(self.centres_t, n + 1, limit, axis=1)
         self.stats = ensure_capacity(self.stats, n + 1, limit, axis=1)
         self.support_counts = ensure_capacity(self.support_counts, n + 1, limit)
+        self._arrays = None
         return True
 
     def snapshot(self) -> dict[str, Any]:

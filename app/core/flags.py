@@ -36,6 +36,7 @@ class StateFlags:
         self.table = np.zeros((3, 0), dtype=np.int64)
         self._failures = np.zeros((0, n_criteria), dtype=np.int64)
         self._flagged: tuple[IntArray, IntArray] | None = None
+        self._arrays: tuple[IntArray, IntArray] | None = None  # see arrays
 
     @property
     def flags(self) -> npt.NDArray[np.int64]:
@@ -54,9 +55,11 @@ class StateFlags:
         return read_only(self.table[ENTRIES, : self._n])
 
     def arrays(self) -> tuple[IntArray, IntArray]:
-        """What a compiled step counts in (:func:`observe`'s arrays); the same arrays until
-        a state is added."""
-        return self.table, self._failures
+        """What a compiled step counts in (:func:`observe`'s arrays): the same tuple until a
+        state is added."""
+        if self._arrays is None:
+            self._arrays = (self.table, self._failures)
+        return self._arrays
 
     @property
     def failures(self) -> npt.NDArray[np.int64]:
@@ -76,6 +79,7 @@ class StateFlags:
         n = self._n
         self.table = ensure_capacity(self.table, n + 1, self.max_states, axis=1)
         self._failures = ensure_capacity(self._failures, n + 1, self.max_states)
+        self._arrays = None
         self._n = n + 1
 
     def observe(self, state: int, criterion: int | None, entered: bool) -> None:

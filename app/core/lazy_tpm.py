@@ -69,6 +69,7 @@ class LazyTransitions:
         self._pool_cols: ColArray = np.zeros(0, dtype=np.int32)
         self._pool_vals: FloatArray = np.zeros(0)
         self._used = np.zeros(1, dtype=np.int64)  # pool slots handed out to rows
+        self._arrays: tuple[Any, ...] | None = None  # see arrays
         self._log_prior = math.log(config.prior)
         self._scratch = np.zeros(0, dtype=np.int64)  # see _learn
 
@@ -85,10 +86,12 @@ class LazyTransitions:
 
     def arrays(self) -> tuple[FloatArray, FloatArray, IntArray, ColArray, FloatArray, IntArray,
                               IntArray]:
-        """What a compiled step learns a transition with (:func:`learn`'s arrays, in order);
-        the same arrays until a state is added or the pool is compacted."""
-        return (self._log_decay, self._rows, self._row_counts, self._pool_cols,
-                self._pool_vals, self._used, self._scratch)
+        """What a compiled step learns a transition with (:func:`learn`'s arrays, in order):
+        the same tuple until a state is added or the pool is compacted."""
+        if self._arrays is None:
+            self._arrays = (self._log_decay, self._rows, self._row_counts, self._pool_cols,
+                            self._pool_vals, self._used, self._scratch)
+        return self._arrays
 
     def add_state(self) -> None:
         """Expand every matrix by one state: the new pads are ``eps`` at today's scale."""
@@ -101,6 +104,7 @@ class LazyTransitions:
         self._views()
         if self._scratch.shape[0] < n + 1:
             self._scratch = np.zeros(limit, dtype=np.int64)
+        self._arrays = None
         self._created[:, n] = -self._log_decay
         self._offset[:, n] = -self._log_decay
         self._n = n + 1
@@ -159,6 +163,7 @@ class LazyTransitions:
         self._used[0] = _compact(self._start[:, :n], self._cap[:, :n], self._nnz[:, :n],
                                  self._pool_cols, self._pool_vals, cols, vals)
         self._pool_cols, self._pool_vals = cols, vals
+        self._arrays = None
 
     def _entries(self, a: int) -> tuple[IntArray, ColArray, FloatArray]:
         """Action ``a``'s learned entries in row order, each row's in the order learned:

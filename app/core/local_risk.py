@@ -86,6 +86,7 @@ class LocalRisk:
         self._queue_phi = np.zeros((0, ring, self.size))
         self._queue_ends = np.zeros((0, 2), dtype=np.int64)  # per slot: first row, length
         self.failures = np.zeros(n_criteria, dtype=np.int64)  # learned, per criterion
+        self._arrays: tuple[Any, ...] | None = None  # see arrays
 
     @property
     def any_failure(self) -> bool:
@@ -111,6 +112,7 @@ class LocalRisk:
         self._low[n] = np.inf
         self._high[n] = -np.inf
         self._n = n + 1
+        self._arrays = None
 
     def reserve(self, slot: int) -> None:
         """Room for the steps of the stream in ``slot``."""
@@ -121,6 +123,7 @@ class LocalRisk:
         self._queue_prob = ensure_capacity(self._queue_prob, slot + 1, limit)
         self._queue_phi = ensure_capacity(self._queue_phi, slot + 1, limit)
         self._queue_ends = ensure_capacity(self._queue_ends, slot + 1, limit)
+        self._arrays = None
 
     def learn(self, slot: int, belief: Belief, z: FloatArray, action_bin: int,
               failure: int | None, ended: bool) -> None:
@@ -134,10 +137,12 @@ class LocalRisk:
     def arrays(self) -> tuple[FloatArray, FloatArray, IntArray, FloatArray, FloatArray,
                               FloatArray, IntArray, FloatArray, FloatArray, IntArray, IntArray]:
         """What a compiled step learns and decides with (:func:`learn_step`'s arrays, in
-        order); the same arrays until a state is added or a new slot reserved."""
-        return (self._theta, self._cov, self._tried, self._low, self._high, self.midpoints,
-                self._queue_index, self._queue_prob, self._queue_phi, self._queue_ends,
-                self.failures)
+        order): the same tuple until a state is added or a new slot reserved."""
+        if self._arrays is None:
+            self._arrays = (self._theta, self._cov, self._tried, self._low, self._high,
+                            self.midpoints, self._queue_index, self._queue_prob,
+                            self._queue_phi, self._queue_ends, self.failures)
+        return self._arrays
 
     def pending(self, slot: int) -> int:
         """How many steps of the stream in ``slot`` await their labels."""

@@ -20,7 +20,7 @@ import numpy.typing as npt
 from app.core import _stored as stored
 from app.core import actions, reviser, risk
 from app.core.belief import Belief, recognise
-from app.core.clustering import NEW, REPLACED, EvolvingClusterer
+from app.core.clustering import NEW, REPLACED, STATES, EvolvingClusterer
 from app.core.config import ActionSpec, ShieldConfig, TransitionConfig
 from app.core.errors import (
     InvalidAction,
@@ -51,6 +51,7 @@ _NO_INDEX = np.zeros(0, dtype=np.int64)
 _NO_FLOATS = np.zeros(0)
 _NO_VERDICTS = np.zeros(0, dtype=np.int64)
 _NO_RISKS = np.zeros((0, 0))
+_NUMBERS = (int, float, np.floating)
 
 
 @dataclass(slots=True)
@@ -232,6 +233,8 @@ class Shield:
         self.local_risk = self._new_local_risk()
         self.streams: dict[str, StreamState] = {}  # least recently stepped first
         self._free_slots: list[int] = []  # slots of streams that ended, reused first
+        self._model_arrays: tuple[Any, ...] = ()  # see _arrays
+        self._parts: tuple[Any, ...] = ()
         self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria})
         self._rng = np.random.default_rng(cfg.reviser.seed)
 
@@ -335,24 +338,18 @@ class Shield:
         checked = None if action is None else self._check_action(action, "action")
         applied = (None if applied_action is None
                    else self._check_action(applied_action, "applied_action"))
-        return StepInput(
-            observation=z,
-            action=checked,
-            action_bin=0 if checked is None else actions.encode(checked, self.config.action),
-            stream=stream,
-            event=criterion,
-            done=bool(done),
-            applied_action=applied,
-            applied_bin=-1 if applied is None else actions.encode(applied, self.config.action),
-            learn=bool(learn),
-            shadow=bool(shadow),
-        )
+        spec = self.config.action
+        return StepInput(  # positional: on the per-step path
+            z, checked, 0 if checked is None else actions.encode(checked, spec), stream,
+            criterion, bool(done), applied,
+            -1 if applied is None else actions.encode(applied, spec), bool(learn), bool(shadow))
 
     def _check_action(self, value: float, name: str) -> float:
         spec = self.config.action
-        if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
-            raise InvalidAction(f"{name} must be a number", field=name)
-        value = float(value)
+        if type(value) is not float:  # (the common case, checked first: it is per step)
+            if isinstance(value, bool) or not isinstance(value, _NUMBERS):
+                raise InvalidAction(f"{name} must be a number", field=name)
+            value = float(value)
         if not math.isfinite(value):
             raise InvalidAction(f"{name} must be finite", field=name)
         if not spec.low <= value <= spec.high:
@@ -371,7 +368,7 @@ class Shield:
         cfg = self.config
         clusterer = self.clusterer
         clusterer.make_room()
-        size = min(clusterer.n_states + 1, self._top_k)
+        size = min(int(clusterer.counts[STATES]) + 1, self._top_k)
         z = np.empty(self.space.size)
         index = np.empty(size, dtype=np.int64)
         prob = np.empty(size)
@@ -385,7 +382,7 @@ class Shield:
             self._add_state()
         elif kind == REPLACED and cfg.transitions.on_replace == "reset":
             self.transitions.reset_row(at)  # A16
-        belief = Belief(index[:m], prob[:m])
+        belief = Belief(index, prob) if m == size else Belief(index[:m], prob[:m])
         state = self._stream(step.stream)
         decide = self._by_risk and not step.done
         by_bin, verdicts = _NO_RISKS, _NO_VERDICTS
@@ -436,19 +433,11 @@ class Shield:
         if prev is not None and state.z is not None and self.local_risk is not None:
             # (a stream restored from a snapshot of the paper's reviser lacks z)
             risk_bin = state.applied_bin if step.applied_bin < 0 else step.applied_bin
-        cfg = self.config
-        local = self.local_risk
         tpm = self.transitions
         lazy = isinstance(tpm, LazyTransitions)
-        model = _NO_RISK if local is None else local.arrays()
         while True:
-            transitions = tpm.arrays() if isinstance(tpm, LazyTransitions) else _NO_TRANSITIONS
-            fixed = (cfg.transitions.learning_rate, *transitions, cfg.risk.horizon, *model,
-                     *self.flags.arrays(), cfg.reviser.flags == "rate",
-                     cfg.reviser.flag_min_rate, self._safe_steps, cfg.risk.threshold,
-                     cfg.risk.margin)
             needed, changed, decided, limit, worst, final, kept = learn_and_decide(
-                *fixed,
+                *self._arrays(),  # type: ignore[call-arg]  # (its 27 typed in the kernel)
                 _NO_INDEX if prev is None else prev.index,
                 _NO_FLOATS if prev is None else prev.prob,
                 _NO_FLOATS if state.z is None else state.z, belief.index, belief.prob, z,
@@ -515,6 +504,24 @@ class Shield:
         self.flags.add_state()
         if self.local_risk is not None:
             self.local_risk.add_state()
+
+    def _arrays(self) -> tuple[Any, ...]:
+        """The settings and arrays :func:`~app.core.step.learn_and_decide` takes before the
+        step's own: gathered again only when a part hands out other arrays (a state added,
+        the TPM pool compacted, a stream's slot reserved)."""
+        tpm, local = self.transitions, self.local_risk
+        parts = (tpm.arrays() if isinstance(tpm, LazyTransitions) else _NO_TRANSITIONS,
+                 _NO_RISK if local is None else local.arrays(), self.flags.arrays())
+        old = self._parts
+        if (not old or parts[0] is not old[0] or parts[1] is not old[1]
+                or parts[2] is not old[2]):
+            cfg = self.config
+            self._parts = parts
+            self._model_arrays = (
+                cfg.transitions.learning_rate, *parts[0], cfg.risk.horizon, *parts[1],
+                *parts[2], cfg.reviser.flags == "rate", cfg.reviser.flag_min_rate,
+                self._safe_steps, cfg.risk.threshold, cfg.risk.margin)
+        return self._model_arrays
 
     def _what_if(self, step: StepInput) -> Decision:
         """``learn=False``: answer from the model as it is, changing nothing (noise included)."""
@@ -669,14 +676,11 @@ class Shield:
                 action = proposed if step.shadow else suggested
                 reason = "revised_safety" if final < start else "revised_speed"
                 revised = True
-        return Decision(
-            action=action, proposed=proposed, revised=revised,
-            reason=reason, verdict=verdict, risk=risks, threshold=threshold,
-            candidates=candidates, state=recognised, n_states=self.n_states, new_state=is_new,
-            episode=self.counters.episodes, step=index,
-            model_version=self.counters.model_version, stream=step.stream, shadow=step.shadow,
-            suggested=suggested,
-        )
+        counters = self.counters
+        return Decision(  # positional: on the per-step path, and half the cost of keywords
+            action, proposed, revised, reason, verdict, risks, threshold, candidates,
+            recognised, self.clusterer.n_states, is_new, counters.episodes, index,
+            counters.model_version, step.stream, step.shadow, suggested)
 
     def _verdict_name(self, verdict: int) -> str:
         return "ok" if verdict == reviser.OK else self.config.criteria[verdict].name
