@@ -146,17 +146,16 @@ class EvolvingClusterer:
                             self.counts, self.params, self.modes)
         return self._arrays
 
-    def make_room(self) -> bool:
-        """Room for one more state (whether the arrays were replaced to make it)."""
+    def make_room(self) -> None:
+        """Room for one more state."""
         n = self.n_states
         if n < self.centres_t.shape[1]:
-            return False
+            return
         limit = self.max_states
         self.centres_t = ensure_capacity(self.centres_t, n + 1, limit, axis=1)
         self.stats = ensure_capacity(self.stats, n + 1, limit, axis=1)
         self.support_counts = ensure_capacity(self.support_counts, n + 1, limit)
         self._arrays = None
-        return True
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state as plain data and arrays."""

@@ -367,8 +367,10 @@ class Shield:
             return self._what_if(step)
         cfg = self.config
         clusterer = self.clusterer
-        clusterer.make_room()
-        size = min(int(clusterer.counts[STATES]) + 1, self._top_k)
+        n = int(clusterer.counts[STATES])
+        if n == clusterer.centres_t.shape[1]:
+            clusterer.make_room()
+        size = min(n + 1, self._top_k)
         z = np.empty(self.space.size)
         index = np.empty(size, dtype=np.int64)
         prob = np.empty(size)
