@@ -8,6 +8,10 @@ its first step and says whether the collision happens anyway (then nothing could
 braking harder is impossible, and braking less only closes the gap sooner).
 
     python results/scripts/unavoidable.py results/paper-protocol-local --after 150
+
+With ``--every-start`` it replays every episode after ``--after`` instead, failed or not, and
+says which runs drew a start that no controller survives: the runs that no shield can keep
+free of failures there, whatever it does.
 """
 
 from __future__ import annotations
@@ -37,7 +41,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path)
     parser.add_argument("--after", type=int, default=150)
+    parser.add_argument("--every-start", action="store_true",
+                        help="replay every episode after --after, failed or not")
     args = parser.parse_args()
+    if args.every_start:
+        every_start(args.out, args.after)
+        return
     unavoidable = total = 0
     for path in sorted((args.out / "records").glob("*.jsonl")):
         lines = [json.loads(line) for line in path.open()]
@@ -62,6 +71,33 @@ def main() -> None:
                                  f"{'a collision anyway' if anyway else 'none'}\n")
     sys.stdout.write(f"{unavoidable} of {total} collisions after episode {args.after} "
                      "could not be avoided\n")
+
+
+def every_start(out: Path, after: int) -> None:
+    """Per run, the episodes after ``after`` whose start collides under full braking."""
+    doomed_runs = 0
+    paths = sorted((out / "records").glob("*.jsonl"))
+    for path in paths:
+        with path.open() as file:
+            header = json.loads(file.readline())["header"]
+        episodes = header["config"]["episodes"]
+        env = CarFollowingEnv(lead=profiles(header["config"]["lead"]))
+        env.reset(seed=header["seed"])
+        doomed = []
+        for episode in range(1, episodes + 1):
+            if episode > 1:
+                env.reset()
+            if episode > after:
+                start = env.state()
+                if collides_under_full_braking(env):
+                    doomed.append(episode)
+                env.restore(start)
+        doomed_runs += bool(doomed)
+        sys.stdout.write(f"{path.stem}: {len(doomed)} of {episodes - after} starts after "
+                         f"episode {after} collide under full braking {doomed}\n")
+    sys.stdout.write(f"{doomed_runs} of {len(paths)} runs drew such a start: at most "
+                     f"{len(paths) - doomed_runs} can be free of failures after episode "
+                     f"{after}\n")
 
 
 if __name__ == "__main__":
