@@ -218,6 +218,7 @@ class Shield:
         self._by_risk = cfg.reviser.method == "risk"
         self._decide = self._decide_by_risk if self._by_risk else self._decide_by_flags
         self._top_k = cfg.limits.belief_top_k
+        self._risk_shape = (cfg.action.n_bins, len(self._names))  # actions x criteria
         # the paper's a_max bounds a range symmetric about 0: the half-width, so that the
         # revision noise follows the width of any range, not where it lies
         self._a_max = (cfg.action.high - cfg.action.low) / 2
@@ -389,8 +390,8 @@ class Shield:
         decide = self._by_risk and not step.done
         by_bin, verdicts = _NO_RISKS, _NO_VERDICTS
         if decide:
-            by_bin = np.empty((cfg.action.n_bins, len(self._names)))
-            verdicts = np.empty(cfg.action.n_bins, dtype=np.int64)
+            by_bin = np.empty(self._risk_shape)
+            verdicts = np.empty(self._risk_shape[0], dtype=np.int64)
         decided, limit, worst, final, kept = self._learn(step, state, belief, z, recognised,
                                                          is_new, decide, by_bin, verdicts)
         self.counters.steps += 1
@@ -414,8 +415,12 @@ class Shield:
         assert decision.action is not None and step.action is not None
         state.belief, state.recognised, state.z = belief, recognised, z
         state.proposed_bin = step.action_bin
-        state.applied_bin = (state.proposed_bin if decision.action == step.action
-                             else actions.encode(decision.action, cfg.action))
+        if decision.action == step.action:
+            state.applied_bin = step.action_bin
+        elif self._by_risk:  # the bin it chose, applied at its midpoint
+            state.applied_bin = final
+        else:
+            state.applied_bin = actions.encode(decision.action, cfg.action)
         state.step += 1
         if decision.revised and not decision.shadow:
             self.counters.interventions[decision.verdict] += 1
@@ -664,7 +669,7 @@ class Shield:
         else:
             start = step.action_bin
             threshold = limit
-            risks = dict(zip(names, by_bin[start].tolist(), strict=True))
+            risks = {name: by_bin.item(start, c) for c, name in enumerate(names)}
             verdict = "ok" if kept else names[worst]
             if self.counters.episodes < cfg.reviser.activate_after_episodes:
                 reason = "inactive"
