@@ -50,3 +50,12 @@ class AppMetrics:
         self.decisions = Counter("efsm_decisions", "Decisions by reason",
                                  ["model", "reason"], registry=self.registry)
         self.registry.register(ModelCollector(models))
+        self._by_reason: dict[tuple[str, str], Counter] = {}
+
+    def count_decision(self, model: str, reason: str, n: int = 1) -> None:
+        """Count ``n`` decisions of a model for a reason (each pair's child counter found
+        once: this is on every step's path)."""
+        child = self._by_reason.get((model, reason))
+        if child is None:
+            child = self._by_reason[model, reason] = self.decisions.labels(model, reason)
+        child.inc(n)

@@ -43,9 +43,12 @@ async def step_one(registry: ModelRegistry, name: str, step: Step) -> CoreDecisi
 
 def count(app: Starlette, name: str, decisions: list[CoreDecision]) -> None:
     """Count the decisions per reason in the app's metrics."""
-    counter = app.state.metrics.decisions
+    metrics = app.state.metrics
+    if len(decisions) == 1:  # (a step of its own: no tally to make)
+        metrics.count_decision(name, decisions[0].reason)
+        return
     for reason, n in Counter(d.reason for d in decisions).items():
-        counter.labels(name, reason).inc(n)
+        metrics.count_decision(name, reason, n)
 
 
 def json_response(content: Any) -> Response:
