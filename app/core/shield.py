@@ -168,8 +168,7 @@ class StepInput:
     stream: str
     event: int | None
     done: bool
-    applied_action: float | None
-    applied_bin: int  # the applied action's bin (-1 without one)
+    applied_bin: int  # the bin of the action the controller applied, if it says (-1: not)
     learn: bool
     shadow: bool
 
@@ -235,7 +234,7 @@ class Shield:
         self.streams: dict[str, StreamState] = {}  # least recently stepped first
         self._free_slots: list[int] = []  # slots of streams that ended, reused first
         self._model_arrays: tuple[Any, ...] = ()  # see _arrays
-        self._parts: tuple[Any, ...] = ()
+        self._parts: tuple[Any, ...] = ()  # the parts' arrays it was gathered from
         self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria})
         self._rng = np.random.default_rng(cfg.reviser.seed)
 
@@ -342,8 +341,8 @@ class Shield:
         spec = self.config.action
         return StepInput(  # positional: on the per-step path
             z, checked, 0 if checked is None else actions.encode(checked, spec), stream,
-            criterion, bool(done), applied,
-            -1 if applied is None else actions.encode(applied, spec), bool(learn), bool(shadow))
+            criterion, bool(done), -1 if applied is None else actions.encode(applied, spec),
+            bool(learn), bool(shadow))
 
     def _check_action(self, value: float, name: str) -> float:
         spec = self.config.action
@@ -444,7 +443,7 @@ class Shield:
         lazy = isinstance(tpm, LazyTransitions)
         while True:
             needed, changed, decided, limit, worst, final, kept = learn_and_decide(
-                *self._arrays(),  # type: ignore[call-arg]  # (its 27 typed in the kernel)
+                *self._arrays(),  # type: ignore[call-arg]  # (mypy cannot count a star-tuple)
                 _NO_INDEX if prev is None else prev.index,
                 _NO_FLOATS if prev is None else prev.prob,
                 _NO_FLOATS if state.z is None else state.z, belief.index, belief.prob, z,
@@ -638,9 +637,8 @@ class Shield:
         from."""
         local = self.local_risk
         assert local is not None
-        q = self.config.action.n_bins
-        by_bin = np.empty((q, len(self._names)))
-        verdicts = np.empty(q, dtype=np.int64)
+        by_bin = np.empty(self._risk_shape)
+        verdicts = np.empty(self._risk_shape[0], dtype=np.int64)
         decided = local.any_failure
         limit, worst, final, kept = local.decide(
             belief, z, step.action_bin, self.config.risk.threshold, self.config.risk.margin,
