@@ -43,9 +43,21 @@ class Cluster:
     """``python -m app serve-ray`` in its own process."""
 
     def __init__(self, data_dir: Path) -> None:
+        self.log = data_dir.parent / "serve-ray.log"
+        # The port is free when chosen, but Ray's own processes take ports while it starts:
+        # when one of them took it first, the proxy cannot bind, and the cluster starts again
+        # on another.
+        for _ in range(3):
+            if self._start(data_dir):
+                return
+            if "Failed to bind to address" not in self.log.read_text():
+                break
+        raise RuntimeError(f"serve-ray exited: {self.log.read_text()[-3000:]}")
+
+    def _start(self, data_dir: Path) -> bool:
+        """Start it on a free port; whether it came up (False: it exited)."""
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
-        self.log = data_dir.parent / "serve-ray.log"
         self.process = subprocess.Popen(
             [sys.executable, "-m", "app", "serve-ray", "--host", "127.0.0.1", "--port",
              str(self.port), "--data-dir", str(data_dir), "--shards", "2", "--ingresses", "2",
@@ -54,10 +66,14 @@ class Cluster:
         deadline = time.monotonic() + 180
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
-                raise RuntimeError(f"serve-ray exited: {self.log.read_text()[-3000:]}")
+                try:  # whatever it left running in its session
+                    os.killpg(self.process.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                return False
             try:
                 if httpx.get(self.url + "/readyz", timeout=2).status_code == 200:
-                    return
+                    return True
             except httpx.TransportError:
                 pass
             time.sleep(0.5)
