@@ -260,8 +260,7 @@ class LocalRisk:
         phi = stored.floats(data["phi"], "local_risk.phi", (steps, self.size))
         at = row = 0
         for name, length in zip(names, lengths.tolist(), strict=True):
-            slot = slots[name]
-            self.reserve(slot)
+            slot = slots[name]  # (reserved above, with the highest)
             self._queue_ends[slot] = (0, length)
             for j in range(length):
                 size = int(sizes[row])
