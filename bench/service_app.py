@@ -1,8 +1,9 @@
 """The shield app plus two floors for ``bench/service.py``: a no-op route and a WebSocket echo.
 
-``--timing`` also times every call of ``ModelRegistry.step_many`` (the model's share of a
-request: validation, journal, the e-FSM step) and serves the times at ``GET /bench/timing``,
-which hands them over and starts afresh (for ``bench/service_split.py``).
+``--timing`` also times every call of ``ModelRegistry.try_step`` (the model's share of a
+single request: validation, journal, the e-FSM step) and serves the times at
+``GET /bench/timing``, which hands them over and starts afresh (for
+``bench/service_split.py``).
 
     python bench/service_app.py PORT [--timing]
 """
@@ -52,18 +53,18 @@ def build(timing: bool = False) -> FastAPI:
 
 
 def time_model_steps() -> list[float]:
-    """Wrap ``ModelRegistry.step_many`` so that each call appends its seconds to the list."""
+    """Wrap ``ModelRegistry.try_step`` so that each call appends its seconds to the list."""
     times: list[float] = []
-    step_many = ModelRegistry.step_many
+    try_step = ModelRegistry.try_step
 
     def timed(self: ModelRegistry, *args: Any, **kwargs: Any) -> Any:
         start = time.perf_counter()
         try:
-            return step_many(self, *args, **kwargs)
+            return try_step(self, *args, **kwargs)
         finally:
             times.append(time.perf_counter() - start)
 
-    ModelRegistry.step_many = timed  # type: ignore[method-assign]
+    ModelRegistry.try_step = timed  # type: ignore[method-assign]
     return times
 
 

@@ -2,7 +2,7 @@
 same e-FSM steps in a plain loop and the WebSocket echo of the same app.
 
 The server (``bench/service_app.py --timing``) runs pinned to core 0 and times every call of
-``ModelRegistry.step_many``: validation, journal (none here: models in memory) and the e-FSM
+``ModelRegistry.try_step``: validation, journal (none here: models in memory) and the e-FSM
 step. A second process, pinned to the same core, runs the same steps through
 ``Shield.step`` (validation and the e-FSM step) on the same model in a loop. Default models
 (the risk reviser) of 10 and 1000 states as in ``bench/service.py``; per round the WebSocket

@@ -12,7 +12,8 @@ from app.service.registry import ModelRegistry, UnknownModel
 
 
 class ModelCollector(Collector):
-    """States, episodes and interventions of every model, read at scrape time."""
+    """States, episodes, interventions and decisions of every model, read at scrape time
+    (so that a step costs the metrics nothing)."""
 
     def __init__(self, models: ModelRegistry) -> None:
         self.models = models
@@ -24,17 +25,24 @@ class ModelCollector(Collector):
         interventions = CounterMetricFamily(
             "efsm_interventions", "Revised actions", labels=["model", "criterion"]
         )
+        decisions = CounterMetricFamily(
+            "efsm_decisions", "Decisions served by this process, by reason",
+            labels=["model", "reason"],
+        )
         for name in self.models.names():
             try:
-                shield = self.models.get(name).shield
+                model = self.models.get(name)
             except UnknownModel:  # deleted while scraping
                 continue
+            shield = model.shield
             states.add_metric([name], shield.n_states)
             episodes.add_metric([name], shield.counters.episodes)
             steps.add_metric([name], shield.counters.steps)
             for criterion, count in shield.counters.interventions.items():
                 interventions.add_metric([name, criterion], count)
-        yield from (states, episodes, steps, interventions)
+            for reason, count in dict(model.decisions).items():  # (a copy: steps go on)
+                decisions.add_metric([name, reason], count)
+        yield from (states, episodes, steps, interventions, decisions)
 
 
 class AppMetrics:
@@ -47,15 +55,4 @@ class AppMetrics:
         self.latency = Histogram("efsm_http_request_seconds", "HTTP request latency",
                                  ["route"], registry=self.registry,
                                  buckets=(1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 0.1, 1))
-        self.decisions = Counter("efsm_decisions", "Decisions by reason",
-                                 ["model", "reason"], registry=self.registry)
         self.registry.register(ModelCollector(models))
-        self._by_reason: dict[tuple[str, str], Counter] = {}
-
-    def count_decision(self, model: str, reason: str, n: int = 1) -> None:
-        """Count ``n`` decisions of a model for a reason (each pair's child counter found
-        once: this is on every step's path)."""
-        child = self._by_reason.get((model, reason))
-        if child is None:
-            child = self._by_reason[model, reason] = self.decisions.labels(model, reason)
-        child.inc(n)

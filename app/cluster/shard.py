@@ -139,7 +139,7 @@ class ShardServer:
     async def frame(self, name: str, text: str) -> str | Moved:
         """One WebSocket frame (a step of model ``name``): the decision record or an error."""
         async with self.gates.use([name]):
-            return self._away([name]) or await answer(self.app, self.registry, name, text)
+            return self._away([name]) or await answer(self.registry, name, text)
 
     async def refusal(self, name: str) -> dict[str, Any] | Moved | None:
         """The error body that refuses a stream of model ``name``, None if it serves here."""

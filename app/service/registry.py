@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 import re
 import threading
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -73,6 +73,7 @@ class Model:
     snapshotting: threading.Lock = field(default_factory=threading.Lock)  # one write at a time
     since_snapshot: int = 0
     watchers: list[Watcher] = field(default_factory=list)
+    decisions: dict[str, int] = field(default_factory=dict)  # served here, by reason
 
 
 Watcher = Callable[[dict[str, Any]], None]
@@ -326,20 +327,44 @@ class ModelRegistry:
 
     def step(self, name: str, step: Step) -> Decision:
         """One step of one model."""
-        decisions = self.step_many([(name, step)])
-        assert decisions is not None
-        return decisions[0]
+        decision = self._step_one(name, step, blocking=True)
+        assert decision is not None
+        return decision
 
     def try_step(self, name: str, step: Step) -> Decision | None:
         """One step if the model's lock is free right now, else None (nothing done)."""
-        decisions = self.step_many([(name, step)], blocking=False)
-        return None if decisions is None else decisions[0]
+        return self._step_one(name, step, blocking=False)
 
     def step_batch(self, name: str, steps: Sequence[Step]) -> list[Decision]:
         """Steps of one model, in order; one bad step rejects them all."""
         decisions = self.step_many([(name, s) for s in steps])
         assert decisions is not None
         return decisions
+
+    def _step_one(self, name: str, step: Step, blocking: bool) -> Decision | None:
+        """:meth:`step_many` of one step, without a batch's bookkeeping: the path of every
+        single request."""
+        model = self.get(name)
+        if not model.lock.acquire(blocking=blocking):
+            return None
+        taking = False
+        try:
+            try:
+                self._check_current(name, model)
+                checked = _validate(model.shield, step, None)
+                if step.learn:
+                    self._journal(model, [step])
+                decision = self._apply(model, step, checked)
+                taking = self._snapshot_due(model)
+                data = self._take(model) if taking else None
+            finally:
+                model.lock.release()
+            if data is not None:  # with the model's lock released
+                model.store.write_snapshot(codec.to_npz(data))  # type: ignore[union-attr]
+        finally:
+            if taking:
+                model.snapshotting.release()
+        return decision
 
     def step_many(self, steps: Sequence[tuple[str, Step]],
                   blocking: bool = True) -> list[Decision] | None:
@@ -356,21 +381,20 @@ class ModelRegistry:
                     if not models[name].lock.acquire(blocking=blocking):
                         return None
                     held.append(models[name])
-                    if self._models.get(name) is not models[name]:  # replaced or deleted
-                        raise UnknownModel(f"model {name!r} was replaced or deleted; send "
-                                           "again", field="name")
-                inputs = [_validate(models[name].shield, step, i, len(steps) > 1)
+                    self._check_current(name, models[name])
+                inputs = [_validate(models[name].shield, step, i)
                           for i, (name, step) in enumerate(steps)]
-                self._journal(models, steps)
-                decisions = [models[name].shield.apply(inp)
-                             for (name, _), inp in zip(steps, inputs, strict=True)]
-                for (name, step), decision in zip(steps, decisions, strict=True):
-                    if models[name].watchers:  # nobody watching: this check is all it costs
-                        self._publish(models[name], step, decision)
+                learned: dict[str, list[Step]] = {}
+                for name, step in steps:
+                    if step.learn:
+                        learned.setdefault(name, []).append(step)
+                for name, group in learned.items():
+                    self._journal(models[name], group)
+                decisions = [self._apply(models[name], step, checked)
+                             for (name, step), checked in zip(steps, inputs, strict=True)]
                 taken = []
                 for model in models.values():
-                    if (model.store is not None and model.since_snapshot >= self.snapshot_every
-                            and model.snapshotting.acquire(blocking=False)):  # else: next step
+                    if self._snapshot_due(model):
                         due.append(model)
                         taken.append(self._take(model))
             finally:
@@ -382,6 +406,28 @@ class ModelRegistry:
             for model in due:
                 model.snapshotting.release()
         return decisions
+
+    def _check_current(self, name: str, model: Model) -> None:
+        """Refuse a model that was replaced or deleted while its lock was awaited."""
+        if self._models.get(name) is not model:
+            raise UnknownModel(f"model {name!r} was replaced or deleted; send again",
+                               field="name")
+
+    def _apply(self, model: Model, step: Step, checked: StepInput) -> Decision:
+        """Apply a validated step (the model's lock held): tally its decision, show it to
+        the model's watchers."""
+        decision = model.shield.apply(checked)
+        tally = model.decisions
+        tally[decision.reason] = tally.get(decision.reason, 0) + 1
+        if model.watchers:  # nobody watching: this check is all it costs
+            self._publish(model, step, decision)
+        return decision
+
+    def _snapshot_due(self, model: Model) -> bool:
+        """Whether the model's snapshot is due now; if so, its write lock is taken (else it
+        waits for a later step)."""
+        return (model.store is not None and model.since_snapshot >= self.snapshot_every
+                and model.snapshotting.acquire(blocking=False))
 
     def watch(self, name: str, watcher: Watcher) -> Callable[[], None]:
         """Call ``watcher`` with every step of a model from now on; returns the unsubscribe."""
@@ -403,26 +449,22 @@ class ModelRegistry:
         for watcher in list(model.watchers):
             watcher(event)
 
-    def _journal(self, models: dict[str, Model], steps: Iterable[tuple[str, Step]]) -> None:
-        """Append the learning steps to their models' journals (models with a store) and
-        count them towards the next snapshot."""
-        grouped: dict[str, list[Step]] = {}
-        for name, step in steps:
-            if step.learn:
-                grouped.setdefault(name, []).append(step)
-        for name, learned in grouped.items():
-            model = models[name]
-            if model.store is not None:
-                version = model.shield.counters.model_version + len(learned)
-                model.store.append({"v": version, "steps": [s.journal() for s in learned]})
-            model.since_snapshot += len(learned)
+    @staticmethod
+    def _journal(model: Model, learned: Sequence[Step]) -> None:
+        """Append a model's learning steps to its journal (if it has a store) and count them
+        towards its next snapshot."""
+        if model.store is not None:
+            version = model.shield.counters.model_version + len(learned)
+            model.store.append({"v": version, "steps": [s.journal() for s in learned]})
+        model.since_snapshot += len(learned)
 
 
-def _validate(shield: Shield, step: Step, index: int, batch: bool) -> StepInput:
+def _validate(shield: Shield, step: Step, index: int | None) -> StepInput:
+    """The step checked by its model; a refusal names the step's ``index`` in a batch."""
     try:
         return shield.validate(**vars(step))
     except ShieldError as error:
-        if batch:
+        if index is not None:
             error.field = f"steps.{index}.{error.field}" if error.field else f"steps.{index}"
         raise
 

@@ -333,6 +333,27 @@ def test_metrics_count_requests_decisions_and_states(client: TestClient) -> None
     assert 'efsm_episodes_total{model="default"} 1.0' in text
 
 
+def decisions_counted(c: TestClient, model: str = "default") -> float:
+    """The model's decisions on /metrics, summed over reasons (and shards, if any)."""
+    return sum(float(line.rsplit(" ", 1)[1]) for line in c.get("/metrics").text.splitlines()
+               if line.startswith("efsm_decisions_total{") and f'model="{model}"' in line)
+
+
+def test_metrics_count_every_decision_once_and_refused_steps_not(client: TestClient) -> None:
+    client.post("/revise", json=STEP)
+    assert client.post("/models/default/revise/batch", json={"steps": [STEP, STEP]}
+                       ).status_code == 200
+    with client.websocket_connect("/ws") as ws:
+        ws.send_text(json.dumps(STEP))
+        ws.receive_json()
+    assert decisions_counted(client) == 4
+    bad = {"observation": [1.0, 2.0], "action": 0.5}
+    assert client.post("/models/default/revise/batch", json={"steps": [STEP, bad]}
+                       ).status_code == 422
+    assert client.post("/revise", json=bad).status_code == 422
+    assert decisions_counted(client) == 4
+
+
 def test_openapi_documents_every_request_field(client: TestClient) -> None:
     schema = client.get("/openapi.json").json()
     request = schema["components"]["schemas"]["ReviseRequest"]

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-from collections import Counter
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Path, Request
 from fastapi.responses import Response
-from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
 
 from app.api.convert import to_json, to_step
@@ -41,16 +39,6 @@ async def step_one(registry: ModelRegistry, name: str, step: Step) -> CoreDecisi
     return decision
 
 
-def count(app: Starlette, name: str, decisions: list[CoreDecision]) -> None:
-    """Count the decisions per reason in the app's metrics."""
-    metrics = app.state.metrics
-    if len(decisions) == 1:  # (a step of its own: no tally to make)
-        metrics.count_decision(name, decisions[0].reason)
-        return
-    for reason, n in Counter(d.reason for d in decisions).items():
-        metrics.count_decision(name, reason, n)
-
-
 def json_response(content: Any) -> Response:
     return Response(to_json(content), media_type="application/json")
 
@@ -60,7 +48,6 @@ async def revise_model(name: NamePath, body: ReviseRequest, request: Request) ->
     """Answer one proposed action of a stream with the decision record."""
     check_token(request)
     decision = await step_one(request.app.state.registry, name, to_step(body))
-    count(request.app, name, [decision])
     return json_response(decision)
 
 
@@ -78,21 +65,18 @@ def check_size(n: int, limit: int) -> None:
 @router.post("/models/{name}/revise/batch", response_model=BatchResponse,
              dependencies=[Depends(require_token)])
 def revise_batch(name: NamePath, body: BatchRequest, registry: RegistryDep,
-                 settings: SettingsDep, request: Request) -> Response:
+                 settings: SettingsDep) -> Response:
     """Steps of one model, applied in order; one bad step rejects the whole batch."""
     check_size(len(body.steps), settings.max_batch)
     decisions = registry.step_batch(name, [to_step(s) for s in body.steps])
-    count(request.app, name, decisions)
     return json_response({"decisions": decisions})
 
 
 @router.post("/revise/batch", response_model=BatchResponse, dependencies=[Depends(require_token)])
-def revise_across(body: ModelBatchRequest, registry: RegistryDep, settings: SettingsDep,
-                  request: Request) -> Response:
+def revise_across(body: ModelBatchRequest, registry: RegistryDep, settings: SettingsDep
+                  ) -> Response:
     """Steps across models (each names its model), in order; one bad step rejects them all."""
     check_size(len(body.steps), settings.max_batch)
     decisions = registry.step_many([(s.model, to_step(s)) for s in body.steps])
     assert decisions is not None
-    for s, d in zip(body.steps, decisions, strict=True):
-        count(request.app, s.model, [d])
     return json_response({"decisions": decisions})

@@ -8,12 +8,11 @@ from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
-from starlette.applications import Starlette
 
 from app.api.auth import given_token, token_ok
 from app.api.convert import to_json, to_step
 from app.api.errors import POLICY_VIOLATION, error_body
-from app.api.routes.revise import NamePath, count, step_one
+from app.api.routes.revise import NamePath, step_one
 from app.api.schemas import ReviseRequest
 from app.core import ShieldError
 from app.service.registry import DEFAULT_MODEL, ModelRegistry
@@ -37,7 +36,7 @@ async def model_stream(websocket: WebSocket, name: NamePath) -> None:
         await refuse(websocket, error_body(error.code, error.message, "name"))
         return
     await serve_frames(websocket, app.state.settings.max_body_bytes,
-                       lambda text: answer(app, registry, name, text))
+                       lambda text: answer(registry, name, text))
 
 
 async def refuse(websocket: WebSocket, body: dict[str, Any]) -> None:
@@ -70,7 +69,7 @@ async def serve_frames(websocket: WebSocket, limit: int,
         await websocket.send_text(await reply(text))
 
 
-async def answer(app: Starlette, registry: ModelRegistry, name: str, text: str) -> str:
+async def answer(registry: ModelRegistry, name: str, text: str) -> str:
     """The reply to one frame: the decision record, or the error body of a bad step."""
     try:
         body = ReviseRequest.model_validate_json(text)
@@ -82,7 +81,6 @@ async def answer(app: Starlette, registry: ModelRegistry, name: str, text: str) 
         return json.dumps(error_body(code, first["msg"], field))
     except ShieldError as error:
         return json.dumps(error_body(error.code, error.message, error.field))
-    count(app, name, [decision])
     return to_json(decision).decode()
 
 
