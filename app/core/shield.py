@@ -21,7 +21,7 @@ from app.core import _stored as stored
 from app.core import actions, reviser, risk
 from app.core.belief import Belief, recognise
 from app.core.clustering import NEW, REPLACED, STATES, EvolvingClusterer
-from app.core.config import ActionSpec, ShieldConfig, TransitionConfig
+from app.core.config import ShieldConfig, TransitionConfig
 from app.core.errors import (
     InvalidAction,
     InvalidConfig,
@@ -68,12 +68,14 @@ class Candidate:
 class RiskCandidates(Sequence[Candidate]):
     """The bins the risk reviser passed over, from the proposal's neighbour to the bin
     applied, built on first use from the step's risk and verdict per bin (most callers never
-    read them)."""
+    read them). ``actions`` are the bins' midpoints and ``verdicts_named`` the criteria's
+    names then ``"ok"``, so that a verdict (-1: ok) indexes its name."""
 
     def __init__(self, bins: range, by_bin: FloatArray, verdicts: npt.NDArray[np.int64],
-                 names: Sequence[str], action: ActionSpec) -> None:
+                 names: Sequence[str], actions: Sequence[float],
+                 verdicts_named: Sequence[str]) -> None:
         self._bins, self._by_bin, self._verdicts = bins, by_bin, verdicts
-        self._names, self._action = names, action
+        self._names, self._actions, self._verdicts_named = names, actions, verdicts_named
         self._built: tuple[Candidate, ...] | None = None
 
     def _all(self) -> tuple[Candidate, ...]:
@@ -85,10 +87,10 @@ class RiskCandidates(Sequence[Candidate]):
         """The candidates as JSON-able records (what :meth:`Decision.to_dict` writes), made
         straight from the arrays: the service's per-step path."""
         names, rows, verdicts = self._names, self._by_bin.tolist(), self._verdicts.tolist()
-        low, width = self._action.low, self._action.step
-        return [{"action": low + (r + 0.5) * width, "bin": r,  # actions.decode(r)
-                 "verdict": "ok" if verdicts[r] < 0 else names[verdicts[r]],
-                 "risk": dict(zip(names, rows[r], strict=True))} for r in self._bins]
+        midpoints, named = self._actions, self._verdicts_named
+        return [{"action": midpoints[r], "bin": r, "verdict": named[verdicts[r]],
+                 "risk": {name: risk for name, risk in zip(names, rows[r], strict=True)}}
+                for r in self._bins]  # (a comprehension builds a small dict faster than dict())
 
     def __iter__(self) -> Iterator[Candidate]:
         return iter(self._all())
@@ -213,6 +215,8 @@ class Shield:
         self._directions = [c.direction for c in cfg.criteria]
         self._safe_steps = risk.safe_steps(self._directions)
         self._names = tuple(c.name for c in cfg.criteria)
+        self._verdicts_named = (*self._names, "ok")  # a verdict's name by its index (-1: ok)
+        self._midpoints = [actions.decode(r, cfg.action) for r in range(cfg.action.n_bins)]
         # the reviser's decision on a proposal: the risk reviser's (the default) or the paper's
         self._by_risk = cfg.reviser.method == "risk"
         self._decide = self._decide_by_risk if self._by_risk else self._decide_by_flags
@@ -676,7 +680,8 @@ class Shield:
             else:
                 way = 1 if final > start else -1
                 candidates = RiskCandidates(range(start + way, final + way, way), by_bin,
-                                            verdicts, names, cfg.action)
+                                            verdicts, names, self._midpoints,
+                                            self._verdicts_named)
                 suggested = actions.decode(final, cfg.action)
                 action = proposed if step.shadow else suggested
                 reason = "revised_safety" if final < start else "revised_speed"
