@@ -176,6 +176,8 @@ BAD = [
      "steps.0.model"),
     ("/models/default/revise/batch", {"steps": [STEP, {**STEP, "observation": [1.0]}, STEP]},
      422, "invalid_observation", "steps.1.observation"),
+    ("/models/default/revise/batch", {"steps": [{**STEP, "observation": [1.0]}]},
+     422, "invalid_observation", "steps.0.observation"),
     ("/revise/batch", {"steps": [{**STEP, "model": "default"}, {**STEP, "model": "ghost"}]},
      404, "unknown_model", "name"),
 ]
