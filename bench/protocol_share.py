@@ -5,7 +5,9 @@ stepping together in one process, one batched update a step, as ``python -m clie
 --lockstep`` runs them) with a timer around every :meth:`Shield.step`, and reports the time in
 the shields against the whole run's, and both per lockstep step. The first 50 episodes are
 the reviser's inactive ones (it learns, it does not revise), so ``--episodes`` beyond 50 shows
-the active shield too.
+the active shield too. The compiled core is loaded before the clock starts (its first calls
+in a process load the kernels from the cache, about half a second that a full protocol
+spreads over hours).
 
     python -m bench.protocol_share --episodes 60
 """
@@ -19,6 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from app.core import compiled
 from app.core.shield import Shield
 from client.experiment.lockstep import run_lockstep
 from client.experiment.runner import ExperimentConfig
@@ -32,6 +35,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=60)
     parser.add_argument("--seed", type=int, default=7)
     args = parser.parse_args()
+    compiled.warm()
     spent = [0.0, 0]
     step = Shield.step
 
