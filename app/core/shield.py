@@ -68,14 +68,14 @@ class Candidate:
 class RiskCandidates(Sequence[Candidate]):
     """The bins the risk reviser passed over, from the proposal's neighbour to the bin
     applied, built on first use from the step's risk and verdict per bin (most callers never
-    read them). ``actions`` are the bins' midpoints and ``verdicts_named`` the criteria's
+    read them). ``midpoints`` are the bins' actions and ``verdicts_named`` the criteria's
     names then ``"ok"``, so that a verdict (-1: ok) indexes its name."""
 
     def __init__(self, bins: range, by_bin: FloatArray, verdicts: npt.NDArray[np.int64],
-                 names: Sequence[str], actions: Sequence[float],
+                 names: Sequence[str], midpoints: Sequence[float],
                  verdicts_named: Sequence[str]) -> None:
         self._bins, self._by_bin, self._verdicts = bins, by_bin, verdicts
-        self._names, self._actions, self._verdicts_named = names, actions, verdicts_named
+        self._names, self._midpoints, self._verdicts_named = names, midpoints, verdicts_named
         self._built: tuple[Candidate, ...] | None = None
 
     def _all(self) -> tuple[Candidate, ...]:
@@ -87,7 +87,7 @@ class RiskCandidates(Sequence[Candidate]):
         """The candidates as JSON-able records (what :meth:`Decision.to_dict` writes), made
         straight from the arrays: the service's per-step path."""
         names, rows, verdicts = self._names, self._by_bin.tolist(), self._verdicts.tolist()
-        midpoints, named = self._actions, self._verdicts_named
+        midpoints, named = self._midpoints, self._verdicts_named
         return [{"action": midpoints[r], "bin": r, "verdict": named[verdicts[r]],
                  "risk": {name: risk for name, risk in zip(names, rows[r], strict=True)}}
                 for r in self._bins]  # (a comprehension builds a small dict faster than dict())
