@@ -60,6 +60,10 @@ def build(n: int, seed: int = SEED) -> Shield:
         failure = int(rng.integers(2)) if rng.random() < 0.005 else None
         assert shield.local_risk is not None
         shield.local_risk.learn(0, prev, before, action, failure, ended=False)
+        # the reach's failures lie where failures lie in a world: at an edge of the space
+        edge = 0 if z[1] < 0.03 else 1 if z[1] > 0.97 else None
+        shield.local_risk.learn_motion(prev, before, action, z,
+                                       edge if rng.random() < 0.2 else None)
         prev = belief
     shield.local_risk.forget(0)  # the slot the shield's first stream takes
     return shield

@@ -78,8 +78,9 @@ class Candidate(BaseModel):
     bin: int = Field(description="The action bin, 0 = hardest braking.")
     verdict: str = Field(description="'ok' or the criterion predicted for it.")
     risk: dict[str, float] | None = Field(
-        default=None, description="The risk reviser's probability of each failure within its "
-        "horizon for this action; null for the paper's reviser.")
+        default=None, description="The risk reviser's risk of each failure for this action: "
+        "the larger of the local model's probability within its horizon and the reach's "
+        "closeness to a failure under the safest continuation; null for the paper's reviser.")
 
 
 class Decision(BaseModel):
@@ -93,12 +94,14 @@ class Decision(BaseModel):
                         "cold_start or done.")
     verdict: str = Field(description="What inspecting the proposed action found.")
     risk: dict[str, float] = Field(description="The proposed action's risk per criterion: the "
-                                   "probability of that failure within the horizon (risk "
-                                   "reviser) or the predicted mass on flagged states (paper).")
+                                   "larger of the probability of that failure within the "
+                                   "horizon and the reach's closeness to one (risk reviser), "
+                                   "or the predicted mass on flagged states (paper).")
     threshold: float | None = Field(description="Alg. 1's adaptive threshold for the "
                                     "proposed action (paper reviser) or the largest total "
-                                    "risk kept (risk reviser); null when nothing was "
-                                    "inspected.")
+                                    "risk kept by the table that refused the proposal, the "
+                                    "reach's or the local model's (risk reviser); null when "
+                                    "nothing was inspected.")
     candidates: list[Candidate] = Field(description="Actions inspected while revising.")
     state: int | None = Field(description="The recognised state (argmax belief).")
     n_states: int = Field(description="States after this step.")
@@ -133,7 +136,7 @@ class ModelCreate(BaseModel):
         "across_episodes, on_replace), reviser (activate_after_episodes, noise_k, noise, "
         "horizon, transpose, inspect, search, multi_step, flags, flag_min_rate, one_sided, "
         "seed, method: risk or paper), "
-        "risk (horizon, threshold, margin), "
+        "risk (horizon, threshold, margin, reach_horizon, reach_radius), "
         "limits (max_states, max_streams, belief_top_k, tpm_backend).",
         examples=[{"clustering": {"epsilon": 0.1}, "reviser": {"seed": 7}}],
     )

@@ -1,4 +1,4 @@
-"""The e-FSM and its action reviser in pure numpy (Han, Nageshrao, Filev, Özgüner, IFAC 2020).
+"""The e-FSM and its action reviser in numpy and numba (Han, Nageshrao, Filev, Özgüner, IFAC 2020).
 
 This package knows nothing of HTTP, pydantic or torch: the service and the client both build
 on it. Start with :class:`Shield` and :class:`ShieldConfig`.
@@ -11,6 +11,7 @@ from app.core.config import (
     LimitsConfig,
     ObservationSpec,
     ReviserConfig,
+    RiskConfig,
     ShieldConfig,
     TransitionConfig,
 )
@@ -37,6 +38,7 @@ __all__ = [
     "LimitsConfig",
     "ObservationSpec",
     "ReviserConfig",
+    "RiskConfig",
     "Shield",
     "ShieldConfig",
     "ShieldError",

@@ -251,16 +251,27 @@ class RiskConfig:
     is at most ``threshold`` or within ``margin`` of the safest action's; otherwise the nearest
     allowed action replaces it. The defaults act on any measurable difference
     (docs/risk-reviser.md).
+
+    The reach (:mod:`app.core.reach`) asks first whether a failure can still be avoided:
+    ``reach_horizon`` steps of the learned dynamics under the safest action after the one
+    judged, a path counting as failing by its closeness to a failure seen, within
+    ``reach_radius`` in the clustering space.
     """
 
     horizon: int = 24
     threshold: float = 0.0
     margin: float = 0.001
+    reach_horizon: int = 40  # steps rolled out under the safest continuation (0: no reach)
+    reach_radius: float = 0.05  # normalised distance within which a path meets a failure
 
     def __post_init__(self) -> None:
         _check(1 <= self.horizon <= 256, "horizon", "horizon lies in [1, 256]")
         _check(0.0 <= self.threshold <= 1.0, "threshold", "threshold lies in [0, 1]")
         _check(0.0 <= self.margin <= 1.0, "margin", "margin lies in [0, 1]")
+        _check(0 <= self.reach_horizon <= 1024, "reach_horizon",
+               "reach_horizon lies in [0, 1024]")
+        _check(0.0 < self.reach_radius <= 10.0 and math.isfinite(self.reach_radius),
+               "reach_radius", "reach_radius lies in (0, 10]")
 
 
 @dataclass(frozen=True)
@@ -367,10 +378,12 @@ class ShieldConfig:
             data = _from_version_1(data)
         if version in (1, 2):
             data = _from_version_2(data)
+        if version in (1, 2, 3):
+            data = _from_version_3(data)
         return cls.from_dict(data)
 
 
-CONFIG_VERSION = 3
+CONFIG_VERSION = 4
 
 
 def _from_version_1(data: Mapping[str, Any]) -> dict[str, Any]:
@@ -416,6 +429,20 @@ def _from_version_2(data: Mapping[str, Any]) -> dict[str, Any]:
         ("limits", "outcome_log", 0, 0, False),
     )
     _remove(sections, removed, 3)
+    out["version"] = 3
+    return out
+
+
+def _from_version_3(data: Mapping[str, Any]) -> dict[str, Any]:
+    """Version 3 to 4: the reach (``risk.reach_horizon``, ``risk.reach_radius``) came with
+    version 4; a risk reviser written before it decided without it, and still does (the
+    paper's reviser never reads the section)."""
+    out = _copy(data)
+    reviser = out.get("reviser", {})
+    method = reviser.get("method", "risk") if isinstance(reviser, dict) else None
+    risk_section = out.setdefault("risk", {})
+    if method == "risk" and isinstance(risk_section, dict):
+        risk_section.setdefault("reach_horizon", 0)
     out["version"] = CONFIG_VERSION
     return out
 

@@ -35,6 +35,11 @@ it back.
 **Monotone prior.** Each criterion's direction gives the safe side (braking never raises the
 risk of a collision), so the risks over the action bins are lifted to their running maximum
 from the safe end (:func:`app.core.risk.monotone`).
+
+**Reach.** Beside the risk, the model learns each state's dynamics and where failures were seen
+(:mod:`app.core.reach`): whether a failure can still be avoided after an action under the safest
+continuation, which the behaviour's confounds cannot hide. The decision asks both
+(:func:`app.core.risk.decide_with_reach`).
 """
 
 from __future__ import annotations
@@ -47,7 +52,7 @@ import numpy.typing as npt
 from numba import njit
 
 from app.core import _stored as stored
-from app.core import risk
+from app.core import reach, risk
 from app.core._arrays import ensure_capacity, read_only
 from app.core.belief import Belief
 from app.core.errors import InvalidSnapshot
@@ -67,10 +72,12 @@ class LocalRisk:
     -1 and weight 0 up to ``belief_size``) and its ``phi``."""
 
     def __init__(self, dim: int, n_criteria: int, n_bins: int, horizon: int,
-                 max_states: int, belief_size: int, max_streams: int) -> None:
+                 max_states: int, belief_size: int, max_streams: int, reach_horizon: int = 0,
+                 reach_radius: float = 0.05) -> None:
         self.dim, self.n_criteria, self.n_bins = dim, n_criteria, n_bins
         self.horizon, self.max_states, self.belief_size = horizon, max_states, belief_size
         self.max_streams = max_streams
+        self.reach_horizon, self.reach_radius = reach_horizon, reach_radius
         self.size = dim + 2  # [1, z, u]
         self._n = 0
         self._theta = np.zeros((0, n_criteria, self.size))
@@ -86,6 +93,11 @@ class LocalRisk:
         self._queue_phi = np.zeros((0, ring, self.size))
         self._queue_ends = np.zeros((0, 2), dtype=np.int64)  # per slot: first row, length
         self.failures = np.zeros(n_criteria, dtype=np.int64)  # learned, per criterion
+        # the dynamics per state (dimension x [1, z, u]) and the failures seen (app.core.reach)
+        self._dynamics = np.zeros((0, dim, self.size))
+        self._dynamics_cov = np.zeros((0, self.size, self.size))
+        self._points = np.zeros((n_criteria, reach.MAX_POINTS, dim))
+        self._point_counts = np.zeros((n_criteria, 2), dtype=np.int64)  # kept, next slot
         self._arrays: tuple[Any, ...] | None = None  # see arrays
 
     @property
@@ -99,13 +111,18 @@ class LocalRisk:
         return read_only(self._theta[: self._n])
 
     def add_state(self) -> None:
-        """A new state: no risk until it learns otherwise, weights free to move."""
+        """A new state: no risk and no motion until it learns otherwise, weights free to
+        move."""
         n = self._n
         self._theta = ensure_capacity(self._theta, n + 1, self.max_states)
         self._cov = ensure_capacity(self._cov, n + 1, self.max_states)
         self._tried = ensure_capacity(self._tried, n + 1, self.max_states)
         self._theta[n] = 0.0
         self._cov[n] = np.eye(self.size) * PRIOR_COV
+        self._dynamics = ensure_capacity(self._dynamics, n + 1, self.max_states)
+        self._dynamics_cov = ensure_capacity(self._dynamics_cov, n + 1, self.max_states)
+        self._dynamics[n] = 0.0
+        self._dynamics_cov[n] = np.eye(self.size) * PRIOR_COV
         self._tried[n] = 0
         self._low = ensure_capacity(self._low, n + 1, self.max_states)
         self._high = ensure_capacity(self._high, n + 1, self.max_states)
@@ -131,17 +148,33 @@ class LocalRisk:
         ``action_bin`` applied) ended in ``failure`` (a criterion index) or not; ``ended``
         closes its episode. One compiled call."""
         self.reserve(slot)
-        learn_step(*self.arrays(), slot, belief.index, belief.prob, z, action_bin,
+        learn_step(self._theta, self._cov, self._tried, self._low, self._high, self.midpoints,
+                   self._queue_index, self._queue_prob, self._queue_phi, self._queue_ends,
+                   self.failures, slot, belief.index, belief.prob, z, action_bin,
                    -1 if failure is None else failure, ended, self.horizon)
 
-    def arrays(self) -> tuple[FloatArray, FloatArray, IntArray, FloatArray, FloatArray,
-                              FloatArray, IntArray, FloatArray, FloatArray, IntArray, IntArray]:
+    def learn_motion(self, belief: Belief, before: FloatArray, action_bin: int,
+                     after: FloatArray, failure: int | None) -> None:
+        """A step of the reach (:mod:`app.core.reach`): the dynamics of the belief's states
+        from ``before`` under ``action_bin`` to ``after``, and ``after`` kept as a failure
+        point of criterion ``failure``, if one. What a shield's step learns in its compiled
+        call, for a model built by hand."""
+        phi = np.array([1.0, *before, self.midpoints[action_bin]])
+        reach.learn(self._dynamics, self._dynamics_cov, belief.index, belief.prob, phi, after)
+        if failure is not None:
+            reach.add_failure(self._points, self._point_counts, failure, after,
+                              self.reach_radius)
+
+    def arrays(self) -> tuple[Any, ...]:
         """What a compiled step learns and decides with (:func:`learn_step`'s arrays, in
-        order): the same tuple until a state is added or a new slot reserved."""
+        order, then the reach's: the dynamics, their covariances, the failure points and their
+        counts): the same tuple until a state is added or a new slot reserved."""
         if self._arrays is None:
             self._arrays = (self._theta, self._cov, self._tried, self._low, self._high,
                             self.midpoints, self._queue_index, self._queue_prob,
-                            self._queue_phi, self._queue_ends, self.failures)
+                            self._queue_phi, self._queue_ends, self.failures,
+                            self._dynamics, self._dynamics_cov, self._points,
+                            self._point_counts)
         return self._arrays
 
     def pending(self, slot: int) -> int:
@@ -152,6 +185,11 @@ class LocalRisk:
         """Drop the unlabelled steps in ``slot`` (a stream that expired or ended)."""
         if slot < self._queue_ends.shape[0]:
             self._queue_ends[slot] = 0
+
+    def failure_points(self, criterion: int) -> FloatArray:
+        """The observations (clustering space) where the reach keeps ``criterion``'s
+        failures, oldest slot first (read-only)."""
+        return read_only(self._points[criterion, : self._point_counts[criterion, 0]])
 
     @property
     def tried(self) -> IntArray:
@@ -169,16 +207,19 @@ class LocalRisk:
     def decide(self, belief: Belief, z: FloatArray, proposed_bin: int, threshold: float,
                margin: float, safe: IntArray, by_bin: FloatArray, verdicts: IntArray
                ) -> tuple[float, int, int, bool]:
-        """The risk reviser's decision on a proposal at ``z`` (:func:`app.core.risk.decide`):
-        ``by_bin`` gets each action's risk (:meth:`read`, then the monotone prior) and
-        ``verdicts`` each bin's verdict; one compiled call."""
+        """The risk reviser's decision on a proposal at ``z``
+        (:func:`app.core.risk.decide_with_reach`): ``by_bin`` gets each action's risk, the
+        larger of the local model's (:meth:`read`, then the monotone prior) and the reach's,
+        and ``verdicts`` each bin's verdict; one compiled call."""
         return decide_step(self._theta, self._tried, self._low, self._high, belief.index,
                            belief.prob, z, self.midpoints, safe, proposed_bin, threshold,
-                           margin, by_bin, verdicts)
+                           margin, by_bin, verdicts, self._dynamics, self._points,
+                           self._point_counts, self.reach_horizon, self.reach_radius)
 
     def snapshot(self, slots: Mapping[str, int]) -> dict[str, Any]:
-        """Exact state as arrays: the weights, their covariances, the bins' boxes and the
-        pending steps of the streams named in ``slots`` (name to slot), in its order."""
+        """Exact state as arrays: the weights, their covariances, the bins' boxes, the
+        dynamics and the failure points, and the pending steps of the streams named in
+        ``slots`` (name to slot), in its order."""
         names, lengths, sizes, index, prob, phi = [], [], [], [], [], []
         ring = self.horizon + 1
         for name, slot in slots.items():
@@ -196,7 +237,10 @@ class LocalRisk:
                 phi.append(self._queue_phi[slot, row])
         return {"theta": self.theta.copy(), "cov": self._cov[: self._n].copy(),
                 "tried": self.tried.copy(), **self._boxes(),
-                "failures": self.failures.copy(), "streams": names,
+                "failures": self.failures.copy(), "dynamics": self._dynamics[: self._n].copy(),
+                "dynamics_cov": self._dynamics_cov[: self._n].copy(),
+                "points": self._points.copy(), "point_counts": self._point_counts.copy(),
+                "streams": names,
                 "lengths": np.array(lengths, dtype=np.int64),
                 "sizes": np.array(sizes, dtype=np.int64),
                 "index": np.concatenate(index) if index else np.zeros(0, dtype=np.int64),
@@ -215,7 +259,8 @@ class LocalRisk:
         """Rebuild from :meth:`snapshot` output into a model of ``shape``'s sizes (an empty
         one), checking every part; ``slots`` gives each stream of the model its slot."""
         self = cls(shape.dim, shape.n_criteria, shape.n_bins, shape.horizon,
-                   shape.max_states, shape.belief_size, shape.max_streams)
+                   shape.max_states, shape.belief_size, shape.max_streams,
+                   shape.reach_horizon, shape.reach_radius)
         dim, n_criteria, n_bins, m = self.dim, self.n_criteria, self.n_bins, self.size
         theta = stored.floats(data["theta"], "local_risk.theta", (n_states, n_criteria, m))
         # the covariance only shrinks from PRIOR_COV * I as steps are fitted
@@ -236,8 +281,32 @@ class LocalRisk:
                                       field="local_risk.low")
             self._low[~empty], self._high[~empty] = low[~empty], high[~empty]
         self.failures = stored.ints(data["failures"], "local_risk.failures", (n_criteria,)).copy()
+        self._restore_reach(n_states, data)
         self._restore_pending(n_states, slots, data)
         return self
+
+    def _restore_reach(self, n_states: int, data: dict[str, Any]) -> None:
+        """The dynamics and failure points (a snapshot from before them: none learned)."""
+        m, shape = self.size, (n_states, self.dim, self.size)
+        self._dynamics = np.zeros(shape)
+        self._dynamics_cov = np.zeros((n_states, m, m))
+        self._dynamics_cov[:] = np.eye(m) * PRIOR_COV
+        if "dynamics" not in data:
+            return
+        self._dynamics = stored.floats(data["dynamics"], "local_risk.dynamics", shape).copy()
+        self._dynamics_cov = stored.floats(data["dynamics_cov"], "local_risk.dynamics_cov",
+                                           (n_states, m, m), low=-PRIOR_COV,
+                                           high=PRIOR_COV).copy()
+        self._points = stored.floats(data["points"], "local_risk.points",
+                                     self._points.shape).copy()
+        limit = reach.MAX_POINTS
+        counts = stored.ints(data["point_counts"], "local_risk.point_counts",
+                             (self.n_criteria, 2), low=0, high=limit)
+        kept, slot = counts[:, 0], counts[:, 1]
+        if (slot >= limit).any() or ((kept < limit) & (slot != kept)).any():
+            raise InvalidSnapshot("a failure point's next slot lies beyond those kept",
+                                  field="local_risk.point_counts")
+        self._point_counts = counts.copy()
 
     def _restore_pending(self, n_states: int, slots: Mapping[str, int],
                          data: dict[str, Any]) -> None:
@@ -390,11 +459,20 @@ def _read(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
 
 @njit(cache=True)
 def decide_step(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
-            index: IntArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
-            safe: IntArray, proposed_bin: int, threshold: float, margin: float,
-            by_bin: FloatArray, verdicts: IntArray) -> tuple[float, int, int, bool]:
-    """:meth:`LocalRisk.decide` on its arrays: :func:`_read`, the monotone prior and the
-    decision."""
+                index: IntArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
+                safe: IntArray, proposed_bin: int, threshold: float, margin: float,
+                by_bin: FloatArray, verdicts: IntArray, dynamics: FloatArray,
+                points: FloatArray, point_counts: IntArray, reach_horizon: int,
+                reach_radius: float) -> tuple[float, int, int, bool]:
+    """:meth:`LocalRisk.decide` on its arrays: :func:`_read` and the reach
+    (:func:`app.core.reach.risk`), each under the monotone prior, and the decision on both
+    (:func:`app.core.risk.decide_with_reach`)."""
     _read(theta, tried, low, high, index, prob, z, midpoints, safe, by_bin)
     risk.monotone(by_bin, safe)
-    return risk.decide(by_bin, proposed_bin, threshold, margin, safe, verdicts)
+    reached = np.zeros(by_bin.shape)
+    if reach_horizon > 0:
+        reach.risk(dynamics, index, prob, z, midpoints, safe, points, point_counts,
+                   reach_horizon, reach_radius, reached)
+        risk.monotone(reached, safe)
+    return risk.decide_with_reach(by_bin, reached, proposed_bin, threshold, margin, safe,
+                                  verdicts)

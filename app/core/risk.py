@@ -12,6 +12,8 @@ estimates, per action, the probability of each failure within a horizon
   to their running maximum from the safe end of the action range.
 * **The decision.** The proposal is kept when its total risk is under an absolute threshold or
   within a margin of the safest action's; otherwise the allowed action nearest to it is applied.
+  With the reach (:mod:`app.core.reach`) two tables are asked: an action must be allowed by the
+  reach, and also by the local model where the two allow an action in common.
 """
 
 from __future__ import annotations
@@ -103,3 +105,51 @@ def decide(by_bin: FloatArray, proposed_bin: int, threshold: float, margin: floa
     if kept:
         return limit, worst, proposed_bin, kept
     return limit, worst, choose(total, proposed_bin, limit, safe[worst]), kept
+
+
+@njit(cache=True)
+def decide_with_reach(by_bin: FloatArray, reached: FloatArray, proposed_bin: int,
+                      threshold: float, margin: float, safe: IntArray, verdicts: IntArray
+                      ) -> tuple[float, int, int, bool]:
+    """One decision on two tables (actions x criteria, both after :func:`monotone`): the
+    local model's risks (``by_bin``) and the reach's (``reached``). The reach decides first:
+    a failure that the safest continuation cannot avoid any more outranks what followed the
+    action before. A bin is allowed when its reach is within the reach's limit and, where some
+    bin is within both limits, its risk within the local one (:func:`kept_limit` each).
+
+    ``verdicts`` gets each bin's: -1 allowed, else the riskiest criterion of the table that
+    refused it (the reach's first); ``by_bin`` becomes the larger of the two, what the
+    decision record shows. Returns the limit of the table that refused the proposal (the
+    local one's when it was kept), the proposal's verdict, the bin to apply (:func:`choose`
+    among the allowed bins, towards the safe side of the proposal's riskiest criterion) and
+    whether that is the proposal."""
+    q, n_c = by_bin.shape
+    local, far = np.empty(q), np.empty(q)
+    for a in range(q):
+        local[a], far[a] = by_bin[a, 0], reached[a, 0]
+        for c in range(1, n_c):
+            local[a] += by_bin[a, c]
+            far[a] += reached[a, c]
+    limit_local = kept_limit(local, threshold, margin)
+    limit_far = kept_limit(far, threshold, margin)
+    both = False
+    for a in range(q):
+        both = both or (far[a] <= limit_far and local[a] <= limit_local)
+    refused = np.zeros(q)  # 0 allowed, 1 refused: what choose picks from
+    for a in range(q):
+        table = reached if far[a] > limit_far else by_bin
+        if far[a] > limit_far or (both and local[a] > limit_local):
+            worst = 0
+            for c in range(1, n_c):
+                if table[a, c] > table[a, worst]:
+                    worst = c
+            verdicts[a], refused[a] = worst, 1.0
+        else:
+            verdicts[a] = -1
+        for c in range(n_c):
+            by_bin[a, c] = max(by_bin[a, c], reached[a, c])
+    limit = limit_far if far[proposed_bin] > limit_far else limit_local
+    worst = verdicts[proposed_bin]
+    if worst < 0:
+        return limit, worst, proposed_bin, True
+    return limit, worst, choose(refused, proposed_bin, 0.0, safe[worst]), False

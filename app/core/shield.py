@@ -248,7 +248,7 @@ class Shield:
             return None
         return LocalRisk(self.space.size, len(cfg.criteria), cfg.action.n_bins,
                          cfg.risk.horizon, cfg.limits.max_states, cfg.limits.belief_top_k,
-                         cfg.limits.max_streams)
+                         cfg.limits.max_streams, cfg.risk.reach_horizon, cfg.risk.reach_radius)
 
     def _new_transitions(self) -> TransitionModel:
         cfg = self.config
@@ -530,7 +530,8 @@ class Shield:
             self._model_arrays = (
                 cfg.transitions.learning_rate, *parts[0], cfg.risk.horizon, *parts[1],
                 *parts[2], cfg.reviser.flags == "rate", cfg.reviser.flag_min_rate,
-                self._safe_steps, cfg.risk.threshold, cfg.risk.margin)
+                self._safe_steps, cfg.risk.threshold, cfg.risk.margin,
+                0 if local is None else cfg.risk.reach_horizon, cfg.risk.reach_radius)
         return self._model_arrays
 
     def _what_if(self, step: StepInput) -> Decision:
@@ -710,6 +711,15 @@ class Shield:
             "failures": self.flags.failures.copy(),
             "support": self.clusterer.support,
         }
+
+    def failure_points(self) -> dict[str, FloatArray]:
+        """Per criterion, the observations (physical units) where the reach keeps its
+        failures (:mod:`app.core.reach`): none without the reach."""
+        local = self.local_risk
+        if local is None or self.config.risk.reach_horizon == 0:
+            return {c.name: np.zeros((0, self.space.size)) for c in self.config.criteria}
+        return {c.name: self.physical(local.failure_points(i))
+                for i, c in enumerate(self.config.criteria)}
 
     def state_view(self, index: int) -> dict[str, Any]:
         """One state: centre in physical units, spread, flag, visits, entries, failures by

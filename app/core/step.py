@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from app.core import flags, lazy_tpm, local_risk
+from app.core import flags, lazy_tpm, local_risk, reach
 from app.core.clustering import learn_and_recognise
 from app.core.observation import normalise
 
@@ -47,9 +47,10 @@ def learn_and_decide(
     pool_cols: ColArray, pool_vals: FloatArray, used: IntArray, slots: IntArray,
     horizon: int, theta: FloatArray, cov: FloatArray, tried: IntArray, low: FloatArray,
     high: FloatArray, midpoints: FloatArray, queue_index: IntArray, queue_prob: FloatArray,
-    queue_phi: FloatArray, queue_ends: IntArray, failures: IntArray,
+    queue_phi: FloatArray, queue_ends: IntArray, failures: IntArray, dynamics: FloatArray,
+    dynamics_cov: FloatArray, points: FloatArray, point_counts: IntArray,
     flag_table: IntArray, flag_failures: IntArray, rate: bool, min_rate: float,
-    safe: IntArray, threshold: float, margin: float,
+    safe: IntArray, threshold: float, margin: float, reach_horizon: int, reach_radius: float,
     prev_index: IntArray, prev_prob: FloatArray, prev_z: FloatArray, index: IntArray,
     prob: FloatArray, z: FloatArray, recognised: int, entered: bool, event: int, done: bool,
     slot: int, transition_bin: int, risk_bin: int, decide: bool, proposed_bin: int,
@@ -58,8 +59,9 @@ def learn_and_decide(
     """What a step learns, then the risk reviser's decision.
 
     The arguments come in groups: the lazy TPM's (:meth:`LazyTransitions.arrays`, after its
-    learning rate), the local risk model's (:meth:`LocalRisk.arrays`, after its horizon), the
-    flags' (:meth:`StateFlags.arrays`, then its mode and rate), the decision's settings; then
+    learning rate), the local risk model's (:meth:`LocalRisk.arrays`, after its horizon, with
+    the reach's), the flags' (:meth:`StateFlags.arrays`, then its mode and rate), the
+    decision's settings (the reach's horizon last but one: 0 without it); then
     the step's: the stream's previous belief and observation, this step's belief and
     observation, the recognised state and whether the stream entered it, the event (a
     criterion, -1: none), whether the episode ended, the stream's slot, the bins to learn the
@@ -80,11 +82,17 @@ def learn_and_decide(
         local_risk.learn_step(theta, cov, tried, low, high, midpoints, queue_index, queue_prob,
                               queue_phi, queue_ends, failures, slot, prev_index, prev_prob,
                               prev_z, risk_bin, event, done, horizon)
+        if reach_horizon > 0:
+            phi = np.empty(prev_z.shape[0] + 2)
+            phi[0], phi[1:-1], phi[-1] = 1.0, prev_z, midpoints[risk_bin]
+            reach.learn(dynamics, dynamics_cov, prev_index, prev_prob, phi, z)
+    if event >= 0 and reach_horizon > 0:
+        reach.add_failure(points, point_counts, event, z, reach_radius)
     changed = flags.observe(flag_table, flag_failures, recognised, event, entered, rate,
                             min_rate)
     if not decide or not failures.any():
         return 0, changed, False, 0.0, 0, 0, False
-    limit, worst, final, kept = local_risk.decide_step(theta, tried, low, high, index, prob,
-                                                       z, midpoints, safe, proposed_bin,
-                                                       threshold, margin, by_bin, verdicts)
+    limit, worst, final, kept = local_risk.decide_step(
+        theta, tried, low, high, index, prob, z, midpoints, safe, proposed_bin, threshold,
+        margin, by_bin, verdicts, dynamics, points, point_counts, reach_horizon, reach_radius)
     return 0, changed, True, limit, worst, final, kept

@@ -151,8 +151,9 @@ def _check_member(archive: zipfile.ZipFile, name: str) -> None:
 
 def readable(shield: Shield, tpm: str = "sparse", action: int | None = None,
              min_prob: float = 1e-3) -> dict[str, Any]:
-    """What a person reads: states in physical units and the matrices (``sparse`` keeps the
-    entries of at least ``min_prob``; ``dense`` all of them; ``none`` leaves them out)."""
+    """What a person reads: states and the reach's failure points in physical units, and the
+    matrices (``sparse`` keeps the entries of at least ``min_prob``; ``dense`` all of them;
+    ``none`` leaves them out)."""
     states = shield.states()
     criteria = [c.name for c in shield.config.criteria]
     out: dict[str, Any] = {
@@ -167,7 +168,9 @@ def readable(shield: Shield, tpm: str = "sparse", action: int | None = None,
                 "failures": dict(zip(criteria, states["failures"][i].tolist(), strict=True)),
             }
             for i in range(shield.n_states)
-        ]
+        ],
+        "failure_points": {name: points.tolist()
+                           for name, points in shield.failure_points().items()},
     }
     if tpm == "none":
         return out

@@ -52,6 +52,9 @@ def test_episodes_flags_and_counters_through_the_api(client: TestClient) -> None
     assert snap["episodes"] == 1 and snap["steps"] == 7
     assert "collision" in [s["flag"] for s in snap["states"]]
     assert sum(s["failures"]["collision"] for s in snap["states"]) == 1
+    # the reach keeps where the collision was seen, in physical units
+    assert snap["failure_points"]["large_distance"] == []
+    assert np.allclose(snap["failure_points"]["collision"], [[16.0, 0.0, 9.0]])
     assert sum(s["visits"] for s in snap["states"]) == 7
     visited = [d["state"] for d in decisions]
     entered = 1 + sum(a != b for a, b in zip(visited, visited[1:], strict=False))

@@ -17,12 +17,14 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from app.core import Shield, ShieldConfig
+from app.core import RiskConfig, Shield, ShieldConfig
 
 DATA = Path(__file__).parent.parent / "data"
 STEPS = 12_000
 EPISODE = 400  # steps before an episode ends without a failure
-PRESETS = {"default": ShieldConfig, "paper": ShieldConfig.paper}
+PRESETS = {"default": ShieldConfig, "paper": ShieldConfig.paper,
+           # the default before the reach, recorded by the core at 6f6cc72
+           "no-reach": lambda: ShieldConfig(risk=RiskConfig(reach_horizon=0))}
 
 
 def preset(name: str) -> ShieldConfig:

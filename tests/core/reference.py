@@ -85,3 +85,19 @@ def cluster(state: dict[str, FloatArray], z: FloatArray, epsilon: float, rho: fl
     state["beta"] = state["beta"] + z
     state["sigma"] += theta
     return kind
+
+
+def reach(dynamics: FloatArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
+          safe_bin: int, points: FloatArray, horizon: int, radius: float) -> FloatArray:
+    """Each bin's reach risk for one criterion (app.core.reach): the belief's blend of the
+    states' dynamics, one step under the bin, then ``horizon - 1`` under ``safe_bin``, each
+    point's closeness ``max(0, 1 - distance / radius)`` to the nearest failure point."""
+    model = np.einsum("i,ikr->kr", prob, dynamics)
+    out = np.zeros(midpoints.shape[0])
+    for a, u in enumerate(midpoints):
+        x = z.copy()
+        for t in range(horizon):
+            x = x + model @ np.concatenate(([1.0], x, [u if t == 0 else midpoints[safe_bin]]))
+            distance = np.sqrt(((points - x) ** 2).sum(axis=1)).min()
+            out[a] = max(out[a], 1.0 - distance / radius)
+    return out

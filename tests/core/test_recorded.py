@@ -32,13 +32,15 @@ def test_a_format_3_snapshot_of_the_local_model_goes_on_as_the_live_model() -> N
     """``snapshot-format-3.json.gz``: the closing snapshot of the recorded loop's first 3,000
     steps of the default preset, written by the core at commit acb0707 (snapshot format 3 with
     the counted model's counts, log and table; configuration version 2 with its settings), a
-    stream in the middle of an episode. It restores to the model the same steps make now, and
-    both decide alike after it."""
+    stream in the middle of an episode. It restores to the model the same steps make now under
+    its configuration (written before the reach: without it), and both decide alike after
+    it."""
     with gzip.open(DATA / "snapshot-format-3.json.gz", "rt") as file:
         old = codec.from_json(json.load(file))
     assert old["format"] == 3 and "outcome_log" in old and old["config"]["version"] == 2
     restored = Shield.from_snapshot(old)
-    live = Shield(preset("default"))
+    live = Shield(preset("no-reach"))
+    assert restored.config == live.config
     run(live, 3000)
     assert_same(restored.snapshot(), live.snapshot())
     rng = np.random.default_rng(1)

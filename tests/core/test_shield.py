@@ -16,6 +16,7 @@ from app.core import (
     InvalidObservation,
     InvalidSnapshot,
     LimitsConfig,
+    RiskConfig,
     Shield,
     ShieldConfig,
     ShieldError,
@@ -169,10 +170,11 @@ def test_snapshot_restore_makes_the_same_decisions() -> None:
 
 def version_2(config: dict[str, Any]) -> dict[str, Any]:
     """A configuration as version 2 of the stored format wrote it: the counted risk model's
-    settings, and the local model named."""
+    settings, the local model named, and no reach (it came with version 4)."""
     old = {key: dict(value) if isinstance(value, dict) else value
            for key, value in config.items()}
     old["version"] = 2
+    del old["risk"]["reach_horizon"], old["risk"]["reach_radius"]
     old["risk"].update(model="local", prior_safe=1.0, refresh_steps=500)
     old["limits"]["outcome_log"] = 200_000
     return old
@@ -250,15 +252,17 @@ def test_a_version_1_configuration_lacking_later_fields_keeps_their_first_values
 
 def test_a_configuration_carries_its_version_and_refuses_another() -> None:
     data = ShieldConfig().to_dict()
-    assert data["version"] == 3 and ShieldConfig.from_dict(data) == ShieldConfig()
+    assert data["version"] == 4 and ShieldConfig.from_dict(data) == ShieldConfig()
     with pytest.raises(InvalidConfig) as raised:
-        ShieldConfig.from_dict({**data, "version": 4})
+        ShieldConfig.from_dict({**data, "version": 3})
     assert raised.value.field == "version"
 
 
 def test_a_version_2_configuration_of_the_local_risk_model_loads_as_it_was() -> None:
     config = ShieldConfig.from_dict({"risk": {"horizon": 12, "margin": 0.01}})
-    assert ShieldConfig.from_stored(version_2(config.to_dict())) == config
+    without_reach = dataclasses.replace(config, risk=RiskConfig(12, margin=0.01,
+                                                                reach_horizon=0))
+    assert ShieldConfig.from_stored(version_2(config.to_dict())) == without_reach
     paper = version_2(ShieldConfig.paper().to_dict())
     paper["risk"]["model"] = "counts"  # not read by the paper's reviser
     assert ShieldConfig.from_stored(paper) == ShieldConfig.paper()

@@ -1,0 +1,182 @@
+"""Risk by reachability: where an action leads under the safest continuation, on learned dynamics.
+
+The local risk model (:mod:`app.core.local_risk`) learns what followed an action under the
+behaviour that followed it. Where a controller acts one way only at one place (it brakes, but
+always too late) that behaviour is a confound: braking is learned to go with crashing, and every
+action reads the same risk. This module answers the other question the issue's probabilistic
+shields ask: *can* a failure still be avoided after this action, if the safest action is taken
+from then on?
+
+**Dynamics.** Each state i keeps a linear model of the change of the observation over one step,
+``z' - z = W_i phi(z, u)`` with ``phi = [1, z, u]`` (the clustering space and the applied
+action's bin midpoint scaled to [0, 1], as in the local risk model), fitted by weighted
+recursive least squares with the weight the step's belief gave the state. Together the states'
+models make a Takagi-Sugeno model of the dynamics, as the local risk model is one of the risk.
+A step's change of observation follows from the action applied, whatever chose it, so the
+dynamics carry no confound of the controller's choices.
+
+**Failures.** Each criterion keeps up to :data:`MAX_POINTS` observations where its failures were
+reported (a new one within half the radius of a kept one adds nothing).
+
+**Reach.** For an action bin a and criterion c the belief's models are blended into one at the
+current observation and rolled out for ``horizon`` steps: the first step under a, every later
+one under c's safest bin (its safe end of the action range). The risk is the largest closeness
+of the path to c's failures, ``max_t max(0, 1 - distance(z_t, failures_c) / radius)``: 1 on a
+path through a seen failure, 0 on one that stays ``radius`` away from all of them. The rolled-out
+model is affine, so every bin's path is ``p_t + q_t u_a`` from one rollout per criterion.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+MAX_POINTS = 64  # failure observations kept per criterion
+MIN_WEIGHT = 1e-3  # belief weights below this do not update a state's dynamics
+
+
+@njit(cache=True)
+def learn(dynamics: FloatArray, cov: FloatArray, index: IntArray, prob: FloatArray,
+          phi: FloatArray, z: FloatArray) -> None:
+    """One transition into the dynamics of the states of the belief it left from (``index``,
+    ``prob``; ``phi = [1, z_before, u]``, ``z`` after): weighted recursive least squares on the
+    change ``z - z_before``, every dimension sharing the state's covariance."""
+    m, d = phi.shape[0], z.shape[0]
+    gain = np.empty(m)
+    for t in range(index.shape[0]):
+        i, weight = index[t], prob[t]
+        if i < 0 or weight < MIN_WEIGHT:
+            continue
+        denominator = 1.0 / weight
+        for r in range(m):
+            total = 0.0
+            for s in range(m):
+                total += cov[i, r, s] * phi[s]
+            gain[r] = total
+            denominator += phi[r] * total
+        for k in range(d):
+            error = z[k] - phi[k + 1]
+            for r in range(m):
+                error -= dynamics[i, k, r] * phi[r]
+            for r in range(m):
+                dynamics[i, k, r] += gain[r] * error / denominator
+        for r in range(m):
+            for s in range(m):
+                cov[i, r, s] -= gain[r] * gain[s] / denominator
+
+
+@njit(cache=True)
+def add_failure(points: FloatArray, counts: IntArray, criterion: int, z: FloatArray,
+                radius: float) -> None:
+    """Keep ``z`` among ``criterion``'s failure observations, unless a kept one lies within
+    half the radius; once full, the oldest kept is replaced (``counts`` holds, per criterion,
+    the points kept and the next slot to write)."""
+    kept = counts[criterion, 0]
+    near = (0.5 * radius) ** 2
+    for f in range(kept):
+        d2 = 0.0
+        for r in range(z.shape[0]):
+            diff = z[r] - points[criterion, f, r]
+            d2 += diff * diff
+        if d2 <= near:
+            return
+    slot = counts[criterion, 1]
+    points[criterion, slot, :] = z
+    counts[criterion, 0] = min(kept + 1, points.shape[1])
+    counts[criterion, 1] = (slot + 1) % points.shape[1]
+
+
+@njit(cache=True)
+def _closest(points: FloatArray, kept: int, c: int, p: FloatArray, v: FloatArray,
+             u_low: float, u_high: float, radius: float, midpoints: FloatArray,
+             nearest: FloatArray) -> None:
+    """``nearest[a]``: the least squared distance from ``p + v u_a`` to criterion c's
+    failure points, counting only the points within ``radius`` of the path's segment (u in
+    ``[u_low, u_high]``; others stay at their value)."""
+    d = p.shape[0]
+    vv = 0.0
+    for r in range(d):
+        vv += v[r] * v[r]
+    reach2 = radius * radius
+    for f in range(kept):
+        wv = ww = 0.0
+        for r in range(d):
+            w = p[r] - points[c, f, r]
+            wv += w * v[r]
+            ww += w * w
+        # |w + v u|^2 = ww + 2 u wv + u^2 vv, least at u = -wv / vv within the segment
+        u = u_low if vv == 0.0 else min(max(-wv / vv, u_low), u_high)
+        if ww + 2.0 * u * wv + u * u * vv > reach2:
+            continue
+        for a in range(midpoints.shape[0]):
+            u = midpoints[a]
+            nearest[a] = min(nearest[a], max(ww + 2.0 * u * wv + u * u * vv, 0.0))
+
+
+@njit(cache=True)
+def risk(dynamics: FloatArray, index: IntArray, prob: FloatArray, z: FloatArray,
+         midpoints: FloatArray, safe: IntArray, points: FloatArray, counts: IntArray,
+         horizon: int, radius: float, out: FloatArray) -> None:
+    """``out`` (bins x criteria): each action's reach risk at ``z`` under the belief
+    (``index``, ``prob``), see the module docstring; 0 for a criterion without failures.
+    Each step of the path is checked against the failure points only where the segment of
+    all bins' points comes within the failures' box widened by the radius."""
+    d, q = z.shape[0], midpoints.shape[0]
+    model = np.zeros((d, d + 2))  # the belief's blend of its states' dynamics
+    for t in range(index.shape[0]):
+        for k in range(d):
+            for r in range(d + 2):
+                model[k, r] += prob[t] * dynamics[index[t], k, r]
+    p, v, step = np.empty(d), np.empty(d), np.empty(d)
+    low, high, nearest = np.empty(d), np.empty(d), np.empty(q)
+    u_low, u_high = midpoints[0], midpoints[q - 1]
+    for c in range(safe.shape[0]):
+        kept = counts[c, 0]
+        out[:, c] = 0.0
+        if kept == 0:
+            continue
+        low[:] = math.inf
+        high[:] = -math.inf
+        for f in range(kept):
+            for r in range(d):
+                low[r] = min(low[r], points[c, f, r] - radius)
+                high[r] = max(high[r], points[c, f, r] + radius)
+        # after the first step the path is p + v u_a: p from [1, z], v the action's column
+        for k in range(d):
+            p[k] = z[k] + model[k, 0]
+            for r in range(d):
+                p[k] += model[k, r + 1] * z[r]
+            v[k] = model[k, d + 1]
+        u_safe = midpoints[0 if safe[c] < 0 else q - 1]
+        for _ in range(horizon):
+            inside = True
+            for r in range(d):
+                first, last = p[r] + v[r] * u_low, p[r] + v[r] * u_high
+                if max(first, last) < low[r] or min(first, last) > high[r]:
+                    inside = False
+            if inside:
+                nearest[:] = math.inf
+                _closest(points, kept, c, p, v, u_low, u_high, radius, midpoints, nearest)
+                for a in range(q):
+                    if nearest[a] < math.inf:
+                        closeness = 1.0 - math.sqrt(nearest[a]) / radius
+                        out[a, c] = max(out[a, c], closeness)
+            # one more step under the safe bin: p <- p + W [1, p, u_safe], v <- v + W_z v
+            for k in range(d):
+                step[k] = model[k, 0] + model[k, d + 1] * u_safe
+                for r in range(d):
+                    step[k] += model[k, r + 1] * p[r]
+            for k in range(d):
+                p[k] += step[k]
+            for k in range(d):
+                step[k] = 0.0
+                for r in range(d):
+                    step[k] += model[k, r + 1] * v[r]
+            for k in range(d):
+                v[k] += step[k]

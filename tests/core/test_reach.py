@@ -1,0 +1,166 @@
+"""The reach (app.core.reach): learned dynamics, failure points, paths under the safest
+continuation, and the decision that asks it before the local model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.core import InvalidConfig, InvalidSnapshot, Shield, ShieldConfig, reach, risk
+from app.core.local_risk import PRIOR_COV
+from tests.core import reference
+from tests.core.test_risk import crash_world
+from tests.utils import assert_same
+
+SAFE = np.array([-1, 1], dtype=np.int64)  # collision-like, then falling-behind-like
+
+
+def test_the_dynamics_are_weighted_ridge_least_squares_on_the_changes() -> None:
+    rng = np.random.default_rng(0)
+    dynamics, cov = np.zeros((2, 2, 4)), np.stack([np.eye(4) * PRIOR_COV] * 2)
+    truth = rng.normal(0, 0.3, (2, 4))
+    rows, changes, weights = [], [], []
+    for _ in range(100):
+        before, u, weight = rng.uniform(0, 1, 2), rng.uniform(0, 1), rng.uniform(0.1, 1)
+        phi = np.array([1.0, *before, u])
+        after = before + truth @ phi + rng.normal(0, 0.01, 2)
+        # the second state's weight is below the floor: it learns nothing
+        reach.learn(dynamics, cov, np.array([0, 1]), np.array([weight, 1e-4]), phi, after)
+        rows.append(phi)
+        changes.append(after - before)
+        weights.append(weight)
+    x, y, w = np.array(rows), np.array(changes), np.array(weights)
+    ridge = x.T @ (w[:, None] * x) + np.eye(4) / PRIOR_COV
+    expected = np.linalg.solve(ridge, x.T @ (w[:, None] * y)).T
+    assert np.allclose(dynamics[0], expected, atol=1e-9)
+    assert np.allclose(dynamics[0], truth, atol=0.02)
+    assert not dynamics[1].any() and np.array_equal(cov[1], np.eye(4) * PRIOR_COV)
+
+
+def test_a_path_towards_a_failure_is_risky_and_one_away_from_it_is_not() -> None:
+    # one dimension: z' - z = -0.2 + 0.4 u, so the slow bin (u 0.25) moves down by 0.1 a
+    # step and the fast one (u 0.75) up by 0.1; a failure seen at 0.15
+    dynamics = np.array([[[-0.2, 0.0, 0.4]]])
+    points = np.zeros((1, reach.MAX_POINTS, 1))
+    points[0, 0, 0] = 0.15
+    counts = np.array([[1, 1]])
+    out = np.empty((2, 1))
+    for safe, expected in ((np.array([-1]), [0.5, 0.0]),  # safe: slow (down from 0.6)
+                           (np.array([1]), [0.0, 0.0])):  # safe: fast, back up after one
+        reach.risk(dynamics, np.array([0]), np.array([1.0]), np.array([0.5]),
+                   np.array([0.25, 0.75]), safe, points, counts, 3, 0.1, out)
+        # slow first, then 3 steps: 0.4, 0.3, 0.2 (0.05 from the failure: half the radius)
+        assert out[:, 0] == pytest.approx(expected)
+    reach.risk(dynamics, np.array([0]), np.array([1.0]), np.array([0.5]),
+               np.array([0.25, 0.75]), np.array([-1]), points, np.array([[0, 0]]), 3, 0.1, out)
+    assert not out.any()  # no failure seen: no risk
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_reach_kernel_gives_the_reference_rollouts(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    d, q, n, horizon, radius = 3, 7, 4, 12, 0.3
+    dynamics = rng.normal(0, 0.1, (n, d, d + 2))
+    index, prob = np.array([0, 2, 3]), rng.dirichlet(np.ones(3))
+    z, midpoints = rng.uniform(0, 1, d), (np.arange(q) + 0.5) / q
+    points = np.zeros((2, reach.MAX_POINTS, d))
+    points[:, :5] = rng.uniform(0, 1, (2, 5, d))
+    out = np.empty((q, 2))
+    reach.risk(dynamics, index, prob, z, midpoints, SAFE, points, np.array([[5, 5], [5, 5]]),
+               horizon, radius, out)
+    for c, safe_bin in enumerate((0, q - 1)):
+        expected = reference.reach(dynamics[index], prob, z, midpoints, safe_bin,
+                                   points[c, :5], horizon, radius)
+        assert out[:, c] == pytest.approx(expected, abs=1e-12)
+
+
+def test_failure_points_near_a_kept_one_add_nothing_and_the_oldest_goes_when_full() -> None:
+    points = np.zeros((1, reach.MAX_POINTS, 1))
+    counts = np.zeros((1, 2), dtype=np.int64)
+    reach.add_failure(points, counts, 0, np.array([0.0]), 0.1)
+    reach.add_failure(points, counts, 0, np.array([0.04]), 0.1)  # within half the radius
+    assert counts.tolist() == [[1, 1]]
+    for k in range(1, reach.MAX_POINTS + 1):
+        reach.add_failure(points, counts, 0, np.array([float(k)]), 0.1)
+    assert counts.tolist() == [[reach.MAX_POINTS, 1]]
+    assert points[0, 0, 0] == reach.MAX_POINTS  # the first point was the oldest
+
+
+def test_without_a_reach_risk_the_decision_is_the_local_models() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        q, proposed = 9, int(rng.integers(9))
+        by_bin = rng.uniform(0, 0.02, (q, 2)) * (rng.random((q, 2)) < 0.5)
+        risk.monotone(by_bin, SAFE)
+        alone, verdicts_alone = by_bin.copy(), np.empty(q, dtype=np.int64)
+        verdicts = np.empty(q, dtype=np.int64)
+        expected = risk.decide(alone, proposed, 0.0, 0.001, SAFE, verdicts_alone)
+        got = risk.decide_with_reach(by_bin, np.zeros((q, 2)), proposed, 0.0, 0.001, SAFE,
+                                     verdicts)
+        assert got == expected and np.array_equal(verdicts, verdicts_alone)
+        assert np.array_equal(by_bin, alone)
+
+
+def test_the_reach_overrules_a_local_model_that_reads_every_action_alike() -> None:
+    q = 5
+    by_bin = np.full((q, 2), 0.0)
+    by_bin[:, 0] = 0.3  # the confound: every action reads the same collision risk
+    reached = np.zeros((q, 2))
+    reached[2:, 0] = 1.0  # from bin 2 on, braking afterwards comes too late
+    verdicts = np.empty(q, dtype=np.int64)
+    limit, worst, final, kept = risk.decide_with_reach(by_bin, reached, 4, 0.0, 0.001, SAFE,
+                                                       verdicts)
+    assert (final, kept, worst) == (1, False, 0)  # the fastest bin the reach allows
+    assert verdicts.tolist() == [-1, -1, 0, 0, 0] and limit == pytest.approx(0.001)
+    assert by_bin[4, 0] == 1.0 and by_bin[0, 0] == 0.3  # the record shows the larger
+
+
+def test_where_both_allow_bins_the_local_model_narrows_the_reachs_choice() -> None:
+    q = 5
+    by_bin = np.zeros((q, 2))
+    by_bin[1:, 0] = 0.4  # the local model allows only the slowest bin
+    reached = np.zeros((q, 2))
+    reached[3:, 0] = 1.0
+    verdicts = np.empty(q, dtype=np.int64)
+    _, _, final, kept = risk.decide_with_reach(by_bin, reached, 4, 0.0, 0.001, SAFE, verdicts)
+    assert (final, kept) == (0, False) and verdicts.tolist() == [-1, 0, 0, 0, 0]
+
+
+def test_a_shield_learns_dynamics_and_failure_points_and_snapshots_them() -> None:
+    shield = Shield(ShieldConfig())
+    crash_world(shield, 20, seed=1)
+    snapshot = shield.snapshot()["local_risk"]
+    assert snapshot["point_counts"][0, 0] >= 1  # the collisions were kept
+    assert np.abs(snapshot["dynamics"]).sum() > 0
+    restored = Shield.from_snapshot(shield.snapshot())
+    assert_same(restored.snapshot(), shield.snapshot())
+    for t in range(50):
+        observation, action = [10.0 + t % 7, 20.0 - t % 5, 12.0], float(t % 5) - 2
+        assert (restored.step(observation, action).to_dict()
+                == shield.step(observation, action).to_dict())
+
+
+def test_a_snapshot_with_a_bad_failure_point_count_is_refused() -> None:
+    shield = Shield(ShieldConfig())
+    crash_world(shield, 20, seed=1)
+    data = shield.snapshot()
+    data["local_risk"]["point_counts"][0] = [3, 7]  # next slot beyond the points kept
+    with pytest.raises(InvalidSnapshot) as error:
+        Shield.from_snapshot(data)
+    assert error.value.field == "local_risk.point_counts"
+
+
+@pytest.mark.parametrize("risk_section", [{"reach_horizon": -1}, {"reach_horizon": 5000},
+                                          {"reach_radius": 0.0}, {"reach_radius": float("nan")}])
+def test_bad_reach_settings_are_refused_naming_the_field(risk_section: dict) -> None:
+    with pytest.raises(InvalidConfig) as error:
+        ShieldConfig.from_dict({"risk": risk_section})
+    assert error.value.field == f"risk.{next(iter(risk_section))}"
+
+
+def test_a_configuration_stored_before_the_reach_loads_without_it() -> None:
+    stored = ShieldConfig().to_dict()
+    stored["version"] = 3
+    del stored["risk"]["reach_horizon"], stored["risk"]["reach_radius"]
+    assert ShieldConfig.from_stored(stored).risk.reach_horizon == 0
+    assert ShieldConfig.from_stored(ShieldConfig().to_dict()).risk.reach_horizon == 40
