@@ -9,7 +9,7 @@ const KEEP_DECISIONS = 300;
 const $ = (id) => document.getElementById(id);
 
 const view = {
-  model: null, token: "", source: null, config: null, states: [], dims: [0, 0],
+  model: null, token: "", source: null, config: null, states: [], dims: [0, 0], points: {},
   version: 0, episodes: 0, failures: [], history: [], current: null, decisions: [],
   streams: new Set(), statesOverSteps: [], picked: null, positions: [], dirty: false,
   tpmTimer: null, counters: null,
@@ -52,6 +52,7 @@ async function load() {
   const doc = await (await api(`/models/${view.model}?tpm=none&exact=false`)).json();
   view.config = doc.config;
   view.states = doc.states;
+  view.points = doc.failure_points || {};
   view.version = doc.model_version;
   view.episodes = doc.episodes;
   view.history = []; view.current = newEpisode(); view.decisions = []; view.streams.clear();
@@ -127,7 +128,8 @@ function drawStates() {
   // the axes span the normalisation bounds and every state beyond them (a headway above its
   // bound normalises above 1 and is still a state)
   const span = (d) => {
-    const centres = view.states.filter(Boolean).map((s) => s.centre[d]);
+    const centres = view.states.filter(Boolean).map((s) => s.centre[d])
+      .concat(...Object.values(view.points).map((ps) => ps.map((p) => p[d])));
     return [Math.min(obs.low[d], ...centres), Math.max(obs.high[d], ...centres)];
   };
   const [x0, x1] = span(dx), [y0, y1] = span(dy);
@@ -147,6 +149,15 @@ function drawStates() {
     ctx.fillStyle = colourOf(s.flag); ctx.globalAlpha = 0.75; ctx.fill(); ctx.globalAlpha = 1;
     if (s.index === view.picked) { ctx.lineWidth = 2; ctx.strokeStyle = "#000"; ctx.stroke(); }
     view.positions.push([s.index, x, y]);
+  }
+  ctx.lineWidth = 1.5;  // where the reach keeps each criterion's failures, as of the last load
+  for (const [name, points] of Object.entries(view.points)) {
+    ctx.strokeStyle = colourOf(name);
+    for (const p of points) {
+      const x = sx(p[dx]), y = sy(p[dy]);
+      ctx.beginPath(); ctx.moveTo(x - 4, y - 4); ctx.lineTo(x + 4, y + 4);
+      ctx.moveTo(x + 4, y - 4); ctx.lineTo(x - 4, y + 4); ctx.stroke();
+    }
   }
 }
 
