@@ -2,9 +2,11 @@
 
 For each size n a model is built through the core's own API (n states spread over the
 normalised observation cube, 20 learned transitions and 40 labelled steps of the local risk
-model per state along a random walk, one in 200 a failure), then it runs the step the service
-runs for every request: validate, normalise, cluster, recognise, learn the transition and the
-step's risk label, read the risk of every action and decide.
+model per state along a random walk, one in 200 a failure; the reach's dynamics along the same
+walk, and its failure points where failures lie in a world, at two faces of the cube), then it
+runs the step the service runs for every request: validate, normalise, cluster, recognise,
+learn the transition, the step's risk label and its dynamics, read the risk and the reach of
+every action and decide. ``--reach-horizon 0`` leaves the reach out (the local model alone).
 
 Two workloads: ``keep``, a smooth controller whose proposals the shield mostly keeps, and
 ``revise``, the strongest acceleration every step, which the shield replaces where braking is
@@ -15,6 +17,7 @@ model's in the same run.
 
     python bench/step_cost.py                        # 10, 1000 and 5000 states
     python bench/step_cost.py --sizes 10 1000 --rounds 3 --steps 2000
+    python bench/step_cost.py --reach-horizon 0      # without the reach
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.core import LimitsConfig, ReviserConfig, Shield, ShieldConfig  # noqa: E402
+from app.core import LimitsConfig, ReviserConfig, RiskConfig, Shield, ShieldConfig  # noqa: E402
 from app.core.belief import recognise  # noqa: E402
 from bench.core_step import spread  # noqa: E402
 
@@ -39,10 +42,12 @@ SEED = 0
 CRITERIA = ("collision", "large_distance")
 
 
-def build(n: int, seed: int = SEED) -> Shield:
+def build(n: int, seed: int = SEED, reach_horizon: int = RiskConfig().reach_horizon
+          ) -> Shield:
     """A default shield of n states with a learned history, the reviser active."""
     config = ShieldConfig(
         reviser=ReviserConfig(seed=seed, activate_after_episodes=0),
+        risk=RiskConfig(reach_horizon=reach_horizon),
         limits=LimitsConfig(max_states=n),
     )
     rng = np.random.default_rng(seed)
@@ -96,10 +101,12 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[10, 1000, 5000])
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=5000)
+    parser.add_argument("--reach-horizon", type=int, default=RiskConfig().reach_horizon,
+                        help="the reach's rollout (0: the local model alone)")
     args = parser.parse_args()
     rows: list[dict[str, Any]] = []
     for n in args.sizes:
-        shield = build(n)
+        shield = build(n, reach_horizon=args.reach_horizon)
         time_steps(shield, steps(200, SEED + 99, "keep"))  # compiled and warm
         row: dict[str, Any] = {"states": n}
         for workload in ("keep", "revise"):
@@ -109,7 +116,8 @@ def main() -> None:
                 times.append(t)
             row[workload] = (statistics.median(times) * 1e6, share)
         rows.append(row)
-    print(f"seed {SEED}; {args.rounds} rounds of {args.steps} steps; "
+    print(f"seed {SEED}, reach horizon {args.reach_horizon}; {args.rounds} rounds of "
+          f"{args.steps} steps; "
           f"median of round means; {platform.machine()}, numpy {np.__version__}, "
           f"Python {platform.python_version()}\n")
     print("| states | keep: step (us) | x smallest | revised | revise: step (us) | x smallest "

@@ -26,6 +26,7 @@ from app.core import (
     lazy_tpm,
     local_risk,
     observation,
+    reach,
     risk,
     step,
 )
@@ -33,7 +34,7 @@ from app.core.config import ShieldConfig
 from app.core.shield import Shield
 
 MODULES: tuple[ModuleType, ...] = (_kernels, observation, clustering, belief, flags, lazy_tpm,
-                                   local_risk, risk, step)
+                                   local_risk, reach, risk, step)
 
 
 @dataclass(frozen=True)
