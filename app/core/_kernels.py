@@ -1,4 +1,4 @@
-"""Arithmetic shared by the compiled kernels: sums in numpy's own order.
+"""Arithmetic shared by the compiled kernels: sums in numpy's own order, weighted least squares.
 
 The core's per-step path runs as numba kernels (``@njit(cache=True)``) on preallocated arrays.
 Where a kernel sums what a numpy expression of the same equation would sum, it sums in numpy's
@@ -15,6 +15,7 @@ import numpy.typing as npt
 from numba import njit
 
 FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
 
 NEG_INF = -math.inf
 
@@ -92,3 +93,34 @@ def logaddexp(x: float, y: float) -> float:
     if d <= 0:
         return y + math.log1p(math.exp(d))
     return x + y
+
+
+@njit(cache=True)
+def weighted_rls(weights: FloatArray, cov: FloatArray, index: IntArray, prob: FloatArray,
+                 phi: FloatArray, targets: FloatArray, min_weight: float) -> None:
+    """One sample ``(phi, targets)`` into the linear models ``weights[i]`` (outputs x
+    features) of the states ``index``: weighted recursive least squares, each with weight
+    ``prob`` (the state's membership), every output sharing the state's covariance
+    ``cov[i]``. Entries of weight below ``min_weight`` (padding among them) change nothing."""
+    m = phi.shape[0]
+    gain = np.empty(m)
+    for t in range(index.shape[0]):
+        i, weight = index[t], prob[t]
+        if weight < min_weight:
+            continue
+        denominator = 1.0 / weight
+        for r in range(m):
+            total = 0.0
+            for s in range(m):
+                total += cov[i, r, s] * phi[s]
+            gain[r] = total
+            denominator += phi[r] * total
+        for c in range(targets.shape[0]):
+            error = targets[c]
+            for r in range(m):
+                error -= weights[i, c, r] * phi[r]
+            for r in range(m):
+                weights[i, c, r] += gain[r] * error / denominator
+        for r in range(m):
+            for s in range(m):
+                cov[i, r, s] -= gain[r] * gain[s] / denominator

@@ -54,6 +54,7 @@ from numba import njit
 from app.core import _stored as stored
 from app.core import reach, risk
 from app.core._arrays import ensure_capacity, read_only
+from app.core._kernels import weighted_rls
 from app.core.belief import Belief
 from app.core.errors import InvalidSnapshot
 
@@ -394,28 +395,7 @@ def _fit(theta: FloatArray, cov: FloatArray, index: IntArray, prob: FloatArray,
     """One labelled step into each belief state's weights: weighted recursive least squares
     with weight ``prob`` (the state's membership), every criterion sharing the covariance.
     Entries of weight below ``MIN_WEIGHT`` (the queue's padding among them) change nothing."""
-    m = phi.shape[0]
-    gain = np.empty(m)
-    for t in range(index.shape[0]):  # (padding: weight 0)
-        i, weight = index[t], prob[t]
-        if weight < MIN_WEIGHT:
-            continue
-        denominator = 1.0 / weight
-        for r in range(m):
-            total = 0.0
-            for s in range(m):
-                total += cov[i, r, s] * phi[s]
-            gain[r] = total
-            denominator += phi[r] * total
-        for c in range(labels.shape[0]):
-            error = labels[c]
-            for r in range(m):
-                error -= theta[i, c, r] * phi[r]
-            for r in range(m):
-                theta[i, c, r] += gain[r] * error / denominator
-        for r in range(m):
-            for s in range(m):
-                cov[i, r, s] -= gain[r] * gain[s] / denominator
+    weighted_rls(theta, cov, index, prob, phi, labels, MIN_WEIGHT)
 
 
 @njit(cache=True)

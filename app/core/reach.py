@@ -34,6 +34,8 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
+from app.core._kernels import weighted_rls
+
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
@@ -47,28 +49,10 @@ def learn(dynamics: FloatArray, cov: FloatArray, index: IntArray, prob: FloatArr
     """One transition into the dynamics of the states of the belief it left from (``index``,
     ``prob``; ``phi = [1, z_before, u]``, ``z`` after): weighted recursive least squares on the
     change ``z - z_before``, every dimension sharing the state's covariance."""
-    m, d = phi.shape[0], z.shape[0]
-    gain = np.empty(m)
-    for t in range(index.shape[0]):
-        i, weight = index[t], prob[t]
-        if i < 0 or weight < MIN_WEIGHT:
-            continue
-        denominator = 1.0 / weight
-        for r in range(m):
-            total = 0.0
-            for s in range(m):
-                total += cov[i, r, s] * phi[s]
-            gain[r] = total
-            denominator += phi[r] * total
-        for k in range(d):
-            error = z[k] - phi[k + 1]
-            for r in range(m):
-                error -= dynamics[i, k, r] * phi[r]
-            for r in range(m):
-                dynamics[i, k, r] += gain[r] * error / denominator
-        for r in range(m):
-            for s in range(m):
-                cov[i, r, s] -= gain[r] * gain[s] / denominator
+    change = np.empty(z.shape[0])
+    for k in range(z.shape[0]):
+        change[k] = z[k] - phi[k + 1]
+    weighted_rls(dynamics, cov, index, prob, phi, change, MIN_WEIGHT)
 
 
 @njit(cache=True)
