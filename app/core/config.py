@@ -270,8 +270,8 @@ class RiskConfig:
         _check(0.0 <= self.margin <= 1.0, "margin", "margin lies in [0, 1]")
         _check(0 <= self.reach_horizon <= 1024, "reach_horizon",
                "reach_horizon lies in [0, 1024]")
-        _check(0.0 < self.reach_radius <= 10.0 and math.isfinite(self.reach_radius),
-               "reach_radius", "reach_radius lies in (0, 10]")
+        _check(0.0 < self.reach_radius <= 10.0, "reach_radius",  # (NaN fails it too)
+               "reach_radius lies in (0, 10]")
 
 
 @dataclass(frozen=True)
