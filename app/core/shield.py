@@ -20,7 +20,7 @@ import numpy.typing as npt
 from app.core import _stored as stored
 from app.core import actions, reviser, risk
 from app.core.belief import Belief, recognise
-from app.core.clustering import NEW, STATES, EvolvingClusterer
+from app.core.clustering import NEW, REPLACED, STATES, EvolvingClusterer
 from app.core.config import ShieldConfig, TransitionConfig
 from app.core.errors import (
     InvalidAction,
@@ -35,8 +35,7 @@ from app.core.lazy_tpm import LazyTransitions
 from app.core.local_risk import LocalRisk
 from app.core.observation import ObservationSpace
 from app.core.observation import check as check_observation
-from app.core.step import learn_and_decide
-from app.core.step import step as compiled_step
+from app.core.step import learn_and_decide, observe
 from app.core.tpm import DenseTransitions, TransitionModel
 
 FloatArray = npt.NDArray[np.float64]
@@ -222,8 +221,6 @@ class Shield:
         self._by_risk = cfg.reviser.method == "risk"
         self._decide = self._decide_by_risk if self._by_risk else self._decide_by_flags
         self._top_k = cfg.limits.belief_top_k
-        self._lazy = cfg.limits.tpm_backend == "lazy"  # the compiled step learns its TPM
-        self._reset_on_replace = cfg.transitions.on_replace == "reset"  # A16
         self._risk_shape = (cfg.action.n_bins, len(self._names))  # actions x criteria
         # the paper's a_max bounds a range symmetric about 0: the half-width, so that the
         # revision noise follows the width of any range, not where it lies
@@ -368,9 +365,8 @@ class Shield:
         return value
 
     def apply(self, step: StepInput) -> Decision:
-        """Carry out a validated step: one compiled call (:func:`app.core.step.step`), two
-        where a state was made, around what only Python does (a new state grows every
-        per-state table)."""
+        """Carry out a validated step: two compiled calls (:mod:`app.core.step`) around what
+        only Python does (a new state grows every per-state table)."""
         if not step.learn:
             return self._what_if(step)
         cfg = self.config
@@ -382,48 +378,25 @@ class Shield:
         z = np.empty(self.space.size)
         index = np.empty(size, dtype=np.int64)
         prob = np.empty(size)
+        # clustering, then Eq. 1 recognition on the states after it
+        space = self.space
+        kind, at, m, recognised = observe(step.observation, space.raw, space.scales,
+                                          space.features, z, *clusterer.arrays(), self._top_k,
+                                          index, prob)
+        is_new = kind == NEW
+        if is_new:  # a new state expands every TPM
+            self._add_state()
+        elif kind == REPLACED and cfg.transitions.on_replace == "reset":
+            self.transitions.reset_row(at)  # A16
+        belief = Belief(index, prob) if m == size else Belief(index[:m], prob[:m])
         state = self._stream(step.stream)
-        prev = state.belief
         decide = self._by_risk and not step.done
         by_bin, verdicts = _NO_RISKS, _NO_VERDICTS
         if decide:
             by_bin = np.empty(self._risk_shape)
             verdicts = np.empty(self._risk_shape[0], dtype=np.int64)
-        lazy = self._lazy
-        transition_bin = self._transition_bin(state, False, step.applied_bin)
-        risk_bin = -1
-        if prev is not None and state.z is not None and self.local_risk is not None:
-            # (a stream restored from a snapshot of the paper's reviser lacks z)
-            risk_bin = state.applied_bin if step.applied_bin < 0 else step.applied_bin
-        event = -1 if step.event is None else step.event
-        space = self.space
-        # clustering, Eq. 1 recognition on the states after it, then what the step learns
-        kind, at, m, recognised, learned, needed, changed, decided, limit, worst, final, kept = (
-            compiled_step(
-                step.observation, space.raw, space.scales, space.features, z,
-                *clusterer.arrays(), self._top_k, index, prob, self._reset_on_replace,
-                *self._arrays(),  # type: ignore[call-arg]  # (mypy cannot count a star-tuple)
-                _NO_INDEX if prev is None else prev.index,
-                _NO_FLOATS if prev is None else prev.prob,
-                _NO_FLOATS if state.z is None else state.z, state.recognised, event, step.done,
-                state.slot, transition_bin if lazy else -1, risk_bin, decide, step.action_bin,
-                by_bin, verdicts))
-        is_new = kind == NEW
-        if is_new:  # a new state expands every TPM
-            self._add_state()
-            transition_bin = self._transition_bin(state, True, step.applied_bin)
-        elif not learned:
-            self.transitions.reset_row(at)  # A16
-        belief = Belief(index, prob) if m == size else Belief(index[:m], prob[:m])
-        if needed or not learned:
-            needed, changed, decided, limit, worst, final, kept = self._learn(
-                step, state, belief, z, recognised, needed, transition_bin if lazy else -1,
-                risk_bin, decide, by_bin, verdicts)
-        if not lazy and transition_bin >= 0:
-            assert prev is not None
-            self.transitions.learn_one(prev, transition_bin, belief)
-        if changed:
-            self.flags.changed()
+        decided, limit, worst, final, kept = self._learn(step, state, belief, z, recognised,
+                                                         is_new, decide, by_bin, verdicts)
         self.counters.steps += 1
         self.counters.model_version += 1
 
@@ -457,28 +430,41 @@ class Shield:
         return decision
 
     def _learn(self, step: StepInput, state: StreamState, belief: Belief, z: FloatArray,
-               recognised: int, needed: int, transition_bin: int, risk_bin: int, decide: bool,
-               by_bin: FloatArray, verdicts: npt.NDArray[np.int64]
-               ) -> tuple[int, bool, bool, float, int, int, bool]:
-        """What the compiled step left to learn (:func:`app.core.step.learn_and_decide`) once
-        the tables have grown for a new state, or after compacting the TPM's pool by the
-        ``needed`` slots (again until it has room)."""
+               recognised: int, is_new: bool, decide: bool, by_bin: FloatArray,
+               verdicts: npt.NDArray[np.int64]) -> tuple[bool, float, int, int, bool]:
+        """What the step learns from the stream's previous one (Eqs. 3-4 under the action
+        behind the transition; the risk label of the action applied, :mod:`app.core.local_risk`,
+        the risk reviser's only) and the flags of the recognised state, then, if ``decide``,
+        the risk reviser's decision: whether it decided (a failure was learned), and the
+        decision (:func:`app.core.risk.decide`)."""
         prev = state.belief
+        transition_bin = self._transition_bin(state, is_new, step.applied_bin)
+        risk_bin = -1
+        if prev is not None and state.z is not None and self.local_risk is not None:
+            # (a stream restored from a snapshot of the paper's reviser lacks z)
+            risk_bin = state.applied_bin if step.applied_bin < 0 else step.applied_bin
+        tpm = self.transitions
+        lazy = isinstance(tpm, LazyTransitions)
         while True:
-            if needed:
-                assert isinstance(self.transitions, LazyTransitions)
-                self.transitions.compact(needed)
-            result = learn_and_decide(
+            needed, changed, decided, limit, worst, final, kept = learn_and_decide(
                 *self._arrays(),  # type: ignore[call-arg]  # (mypy cannot count a star-tuple)
                 _NO_INDEX if prev is None else prev.index,
                 _NO_FLOATS if prev is None else prev.prob,
                 _NO_FLOATS if state.z is None else state.z, belief.index, belief.prob, z,
                 recognised, state.recognised != recognised,
                 -1 if step.event is None else step.event, step.done, state.slot,
-                transition_bin, risk_bin, decide, step.action_bin, by_bin, verdicts)
-            needed = result[0]
+                transition_bin if lazy else -1, risk_bin, decide, step.action_bin, by_bin,
+                verdicts)
             if not needed:
-                return result
+                break
+            assert isinstance(tpm, LazyTransitions)
+            tpm.compact(needed)
+        if not lazy and transition_bin >= 0:
+            assert prev is not None
+            self.transitions.learn_one(prev, transition_bin, belief)
+        if changed:
+            self.flags.changed()
+        return decided, limit, worst, final, kept
 
     def _transition_bin(self, state: StreamState, is_new: bool, applied_bin: int) -> int:
         """The action behind the stream's transition into this step, or -1 when none is

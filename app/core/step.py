@@ -1,15 +1,13 @@
-"""A step of the model in one compiled call, two where a state was made: the per-step path of
-:meth:`Shield.apply`.
+"""A step of the model in two compiled calls: the per-step path of :meth:`Shield.apply`.
 
 :func:`observe` normalises the observation, clusters it and recognises the belief (Eq. 1).
-:func:`learn_and_decide` then learns the stream's previous step (its transition, Eqs. 3-4 on
-the lazy TPM, and its risk label for the local model), counts the recognition and flags the
-state (A4) and, for the risk reviser, decides. :func:`step` does both in one call, unless the
-clustering made a state (or moved one whose transitions are reset, A16): then it stops after
-observing, the shield grows its per-state tables, which only Python does, and calls
-:func:`learn_and_decide`. Each kernel calls the kernels of the modules that own the arrays, so
-every equation has one implementation; this module only orders them, on the arrays the modules
-hand out (``arrays()``), so that a step passes a few dozen arrays to one call instead of many
+Between the two calls the shield grows its per-state tables when a state was made (and resets
+a moved state's transitions, A16), which only Python does. :func:`learn_and_decide` then
+learns the stream's previous step (its transition, Eqs. 3-4 on the lazy TPM, and its risk
+label for the local model), counts the recognition and flags the state (A4) and, for the risk
+reviser, decides. Each kernel calls the kernels of the modules that own the arrays, so every
+equation has one implementation; this module only orders them, on the arrays the modules hand
+out (``arrays()``), so that a step passes a few dozen arrays to two calls instead of many
 small calls from Python.
 """
 
@@ -20,7 +18,7 @@ import numpy.typing as npt
 from numba import njit
 
 from app.core import flags, lazy_tpm, local_risk, reach
-from app.core.clustering import NEW, REPLACED, learn_and_recognise
+from app.core.clustering import learn_and_recognise
 from app.core.observation import normalise
 
 FloatArray = npt.NDArray[np.float64]
@@ -98,44 +96,3 @@ def learn_and_decide(
         theta, tried, low, high, index, prob, z, midpoints, safe, proposed_bin, threshold,
         margin, by_bin, verdicts, dynamics, points, point_counts, reach_horizon, reach_radius)
     return 0, changed, True, limit, worst, final, kept
-
-
-@njit(cache=True)
-def step(
-    x: FloatArray, raw: bool, scales: FloatArray, features: FloatArray, z: FloatArray,
-    centres: FloatArray, stats: FloatArray, support: IntArray, sums: FloatArray,
-    counts: IntArray, params: FloatArray, modes: IntArray, top: int, index: IntArray,
-    prob: FloatArray, reset_on_replace: bool,
-    lr: float, log_decay: FloatArray, numbers: FloatArray, row_counts: IntArray,
-    pool_cols: ColArray, pool_vals: FloatArray, used: IntArray, slots: IntArray,
-    horizon: int, theta: FloatArray, cov: FloatArray, tried: IntArray, low: FloatArray,
-    high: FloatArray, midpoints: FloatArray, queue_index: IntArray, queue_prob: FloatArray,
-    queue_phi: FloatArray, queue_ends: IntArray, failures: IntArray, dynamics: FloatArray,
-    dynamics_cov: FloatArray, points: FloatArray, point_counts: IntArray,
-    flag_table: IntArray, flag_failures: IntArray, rate: bool, min_rate: float,
-    safe: IntArray, threshold: float, margin: float, reach_horizon: int, reach_radius: float,
-    prev_index: IntArray, prev_prob: FloatArray, prev_z: FloatArray, prev_recognised: int,
-    event: int, done: bool, slot: int, transition_bin: int, risk_bin: int, decide: bool,
-    proposed_bin: int, by_bin: FloatArray, verdicts: IntArray,
-) -> tuple[int, int, int, int, bool, int, bool, bool, float, int, int, bool]:
-    """:func:`observe` (its arguments up to ``prob``), then, unless the clustering made a
-    state or moved one and ``reset_on_replace``, :func:`learn_and_decide` (its arguments from
-    ``lr`` to ``reach_radius``, then the stream's previous step: its belief, observation and
-    recognised state, and the step's own, as there; ``transition_bin`` as if no state was
-    made).
-
-    Returns :func:`observe`'s four results, whether it learned, then
-    :func:`learn_and_decide`'s seven (zeros when it did not learn).
-    """
-    kind, at, m, recognised = observe(x, raw, scales, features, z, centres, stats, support,
-                                      sums, counts, params, modes, top, index, prob)
-    if kind == NEW or (kind == REPLACED and reset_on_replace):
-        return kind, at, m, recognised, False, 0, False, False, 0.0, 0, 0, False
-    needed, changed, decided, limit, worst, final, kept = learn_and_decide(
-        lr, log_decay, numbers, row_counts, pool_cols, pool_vals, used, slots, horizon, theta,
-        cov, tried, low, high, midpoints, queue_index, queue_prob, queue_phi, queue_ends,
-        failures, dynamics, dynamics_cov, points, point_counts, flag_table, flag_failures, rate,
-        min_rate, safe, threshold, margin, reach_horizon, reach_radius, prev_index, prev_prob,
-        prev_z, index[:m], prob[:m], z, recognised, prev_recognised != recognised, event, done,
-        slot, transition_bin, risk_bin, decide, proposed_bin, by_bin, verdicts)
-    return kind, at, m, recognised, True, needed, changed, decided, limit, worst, final, kept
