@@ -74,7 +74,8 @@ class ModelBatchRequest(BaseModel):
 class Candidate(BaseModel):
     """An action the reviser inspected."""
 
-    action: float = Field(description="The bin's midpoint (m/s²).")
+    action: float = Field(description="The action the bin applies (m/s²): its midpoint, or "
+                                      "with the risk reviser the range's end for an end bin.")
     bin: int = Field(description="The action bin, 0 = hardest braking.")
     verdict: str = Field(description="'ok' or the criterion predicted for it.")
     risk: dict[str, float] | None = Field(

@@ -56,8 +56,9 @@ _NUMBERS = (int, float, np.floating)
 
 @dataclass(slots=True)
 class Candidate:
-    """An action the reviser inspected: the bin's midpoint, the bin, its verdict and (for the
-    risk reviser) its risk per criterion."""
+    """An action the reviser inspected: the bin's action (the paper's reviser: its midpoint;
+    the risk reviser: the midpoint, the range's end for an end bin), the bin, its verdict and
+    (for the risk reviser) its risk per criterion."""
 
     action: float
     bin: int
@@ -68,14 +69,14 @@ class Candidate:
 class RiskCandidates(Sequence[Candidate]):
     """The bins the risk reviser passed over, from the proposal's neighbour to the bin
     applied, built on first use from the step's risk and verdict per bin (most callers never
-    read them). ``midpoints`` are the bins' actions and ``verdicts_named`` the criteria's
+    read them). ``bin_actions`` are the bins' actions and ``verdicts_named`` the criteria's
     names then ``"ok"``, so that a verdict (-1: ok) indexes its name."""
 
     def __init__(self, bins: range, by_bin: FloatArray, verdicts: npt.NDArray[np.int64],
-                 names: Sequence[str], midpoints: Sequence[float],
+                 names: Sequence[str], bin_actions: Sequence[float],
                  verdicts_named: Sequence[str]) -> None:
         self._bins, self._by_bin, self._verdicts = bins, by_bin, verdicts
-        self._names, self._midpoints, self._verdicts_named = names, midpoints, verdicts_named
+        self._names, self._actions, self._verdicts_named = names, bin_actions, verdicts_named
         self._built: tuple[Candidate, ...] | None = None
 
     def _all(self) -> tuple[Candidate, ...]:
@@ -87,8 +88,8 @@ class RiskCandidates(Sequence[Candidate]):
         """The candidates as JSON-able records (what :meth:`Decision.to_dict` writes), made
         straight from the arrays: the service's per-step path."""
         names, rows, verdicts = self._names, self._by_bin.tolist(), self._verdicts.tolist()
-        midpoints, named = self._midpoints, self._verdicts_named
-        return [{"action": midpoints[r], "bin": r, "verdict": named[verdicts[r]],
+        bin_actions, named = self._actions, self._verdicts_named
+        return [{"action": bin_actions[r], "bin": r, "verdict": named[verdicts[r]],
                  "risk": {name: risk for name, risk in zip(names, rows[r], strict=True)}}
                 for r in self._bins]  # (a comprehension builds a small dict faster than dict())
 
@@ -216,7 +217,11 @@ class Shield:
         self._safe_steps = risk.safe_steps(self._directions)
         self._names = tuple(c.name for c in cfg.criteria)
         self._verdicts_named = (*self._names, "ok")  # a verdict's name by its index (-1: ok)
-        self._midpoints = [actions.decode(r, cfg.action) for r in range(cfg.action.n_bins)]
+        # the risk reviser applies a bin at its midpoint, the end bins at the range's ends: a
+        # criterion's safest action is the end of the range (the hardest braking, not 5% short)
+        spec = cfg.action
+        self._bin_actions = [spec.low, *(actions.decode(r, spec) for r in
+                                         range(1, spec.n_bins - 1)), spec.high]
         # the reviser's decision on a proposal: the risk reviser's (the default) or the paper's
         self._by_risk = cfg.reviser.method == "risk"
         self._decide = self._decide_by_risk if self._by_risk else self._decide_by_flags
@@ -420,7 +425,7 @@ class Shield:
         state.proposed_bin = step.action_bin
         if decision.action == step.action:
             state.applied_bin = step.action_bin
-        elif self._by_risk:  # the bin it chose, applied at its midpoint
+        elif self._by_risk:  # the bin it chose (at its action, ``_bin_actions``)
             state.applied_bin = final
         else:
             state.applied_bin = actions.encode(decision.action, cfg.action)
@@ -658,7 +663,8 @@ class Shield:
         """The risk reviser's decision record (:mod:`app.core.local_risk`,
         :mod:`app.core.risk`): the proposal kept unless its risk is over the threshold and
         beyond the margin of the safest action's; then the nearest allowed bin, at its
-        midpoint. Before any failure was learned (not ``decided``): a cold start."""
+        midpoint (an end bin at the range's end). Before any failure was learned (not
+        ``decided``): a cold start."""
         cfg = self.config
         proposed = step.action
         assert proposed is not None
@@ -681,9 +687,9 @@ class Shield:
             else:
                 way = 1 if final > start else -1
                 candidates = RiskCandidates(range(start + way, final + way, way), by_bin,
-                                            verdicts, names, self._midpoints,
+                                            verdicts, names, self._bin_actions,
                                             self._verdicts_named)
-                suggested = actions.decode(final, cfg.action)
+                suggested = self._bin_actions[final]
                 action = proposed if step.shadow else suggested
                 reason = "revised_safety" if final < start else "revised_speed"
                 revised = True

@@ -23,7 +23,8 @@ DATA = Path(__file__).parent.parent / "data"
 STEPS = 12_000
 EPISODE = 400  # steps before an episode ends without a failure
 PRESETS = {"default": ShieldConfig, "paper": ShieldConfig.paper,
-           # the default before the reach, recorded by the core at 6f6cc72
+           # the default before the reach (recorded by the core at 6f6cc72, again when the
+           # risk reviser's end bins began applying the range's ends)
            "no-reach": lambda: ShieldConfig(risk=RiskConfig(reach_horizon=0))}
 
 

@@ -93,6 +93,32 @@ def test_the_shield_learns_to_refuse_the_action_that_crashed() -> None:
         {"reviser": {**RISK, "activate_after_episodes": 10**6}})), 50, seed=2) / 2
 
 
+@pytest.mark.parametrize(("event", "safe_end"), [("collision", -2.0),
+                                                  ("large_distance", 2.0)])
+def test_a_revision_applies_the_bins_midpoint_and_an_end_bin_the_range_end(
+        event: str, safe_end: float) -> None:
+    # a point that fails whenever it moves towards the criterion's side: revisions go to the
+    # safe side, the safest bin among them, which applies the end of the range (-2 or 2, the
+    # hardest braking or pushing), not its midpoint (-1.9 or 1.9)
+    shield = Shield(ShieldConfig.from_dict({"reviser": {**RISK, "activate_after_episodes": 20}}))
+    rng = np.random.default_rng(3)
+    revised = []
+    for _ in range(60):
+        for _ in range(20):
+            decision = shield.step([25.0 + rng.normal(0, 0.1), 20.0, 10.0],
+                                   float(rng.uniform(-2, 2)))
+            assert decision.action is not None
+            revised += [decision] if decision.revised else []
+            if decision.action * safe_end < 0:
+                shield.step([25.0, 20.0, 10.0], None, done=True, event=event)
+                break
+    applied = {d.candidates[-1].bin: d.action for d in revised}
+    assert applied[0 if safe_end < 0 else 19] == safe_end  # the end bin: the range's end
+    middle = [b for b in applied if 0 < b < 19]
+    assert middle and all(applied[b] == pytest.approx(-1.9 + 0.2 * b) for b in middle)
+    assert all(d.candidates[-1].action == d.action for d in revised)
+
+
 def test_the_risk_reviser_is_deterministic_and_round_trips_its_snapshot() -> None:
     config = ShieldConfig.from_dict({"reviser": {**RISK, "activate_after_episodes": 5}})
     a, b = Shield(config), Shield(config)
