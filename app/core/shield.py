@@ -218,7 +218,7 @@ class Shield:
         self._names = tuple(c.name for c in cfg.criteria)
         self._verdicts_named = (*self._names, "ok")  # a verdict's name by its index (-1: ok)
         # the risk reviser applies a bin at its midpoint, the end bins at the range's ends: a
-        # criterion's safest action is the end of the range (the hardest braking, not 5% short)
+        # criterion's safest action is the end of the range (not half a bin short of it)
         spec = cfg.action
         self._bin_actions = [spec.low, *(actions.decode(r, spec) for r in
                                          range(1, spec.n_bins - 1)), spec.high]
