@@ -98,8 +98,8 @@ def test_the_shield_learns_to_refuse_the_action_that_crashed() -> None:
 def test_a_revision_applies_the_bins_midpoint_and_an_end_bin_the_range_end(
         event: str, safe_end: float) -> None:
     # a point that fails whenever it moves towards the criterion's side: revisions go to the
-    # safe side, the safest bin among them, which applies the end of the range (-2 or 2, the
-    # hardest braking or pushing), not its midpoint (-1.9 or 1.9)
+    # safe side, some of them to its end bin, which applies the end of the range (-2 or 2, the
+    # hardest braking or pushing), not its midpoint (-1.9 or 1.9); the others their midpoints
     shield = Shield(ShieldConfig.from_dict({"reviser": {**RISK, "activate_after_episodes": 20}}))
     rng = np.random.default_rng(3)
     revised = []
