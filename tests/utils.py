@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from app.core import Shield, ShieldConfig
-from app.core.config import ActionSpec, ObservationSpec, ReviserConfig
+from app.core.config import ActionSpec, Criterion, ObservationSpec, ReviserConfig
 
 
 def assert_same(a: Any, b: Any, path: str = "") -> None:
@@ -43,6 +43,8 @@ def random_stream(seed: int, n: int, dim: int = 3) -> list[tuple[list[float], fl
 
 
 CLIFF_OBSERVATION = ObservationSpec(names=("x",), low=(0.0,), high=(1.0,), knee=())
+# the paper's criteria, without the car-following bounds (there is no headway here)
+CLIFF_CRITERIA = (Criterion("collision", "decrease"), Criterion("large_distance", "increase"))
 
 
 def cliff_config(**reviser: Any) -> ShieldConfig:
@@ -54,6 +56,7 @@ def cliff_config(**reviser: Any) -> ShieldConfig:
     return ShieldConfig(
         observation=CLIFF_OBSERVATION,
         action=ActionSpec(),
+        criteria=CLIFF_CRITERIA,
         reviser=ReviserConfig(**options),
     )
 

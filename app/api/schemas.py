@@ -131,7 +131,8 @@ class ModelCreate(BaseModel):
         default_factory=dict,
         description="Overrides of the paper's car-following configuration: observation "
         "(names, low, high, knee, features, cluster_raw), "
-        "action (low, high, step, out_of_range), criteria ([{name, direction}]), "
+        "action (low, high, step, out_of_range), "
+        "criteria ([{name, direction, bound: {observation, below, above} or null}]), "
         "clustering (rho, epsilon, creation_rule, spread, min_variance), "
         "transitions (learning_rate, prior, on_new_state, expansion, action_source, "
         "across_episodes, on_replace), reviser (activate_after_episodes, noise_k, noise, "

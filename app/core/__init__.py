@@ -6,6 +6,7 @@ on it. Start with :class:`Shield` and :class:`ShieldConfig`.
 
 from app.core.config import (
     ActionSpec,
+    Bound,
     ClusteringConfig,
     Criterion,
     LimitsConfig,
@@ -27,6 +28,7 @@ from app.core.shield import Candidate, Decision, Shield
 
 __all__ = [
     "ActionSpec",
+    "Bound",
     "Candidate",
     "ClusteringConfig",
     "Criterion",

@@ -15,6 +15,7 @@ import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import UnionType
 from typing import Any, Literal, TypeVar, get_args, get_origin, get_type_hints
 
 from app.core.errors import InvalidConfig
@@ -137,11 +138,35 @@ class ActionSpec:
 
 
 @dataclass(frozen=True)
+class Bound:
+    """Where a criterion's failures lie, when the user knows it: the observation named
+    ``observation`` at or below ``below``, or at or above ``above`` (either may be left out).
+
+    With a bound the reach (:mod:`app.core.reach`) asks whether the worst case of a path
+    crosses it, at any speed, rather than only whether the path nears a failure seen."""
+
+    observation: str
+    below: float | None = None
+    above: float | None = None
+
+    def __post_init__(self) -> None:
+        _check(bool(self.observation), "observation", "a bound names an observation")
+        _check(self.below is not None or self.above is not None, "below",
+               "a bound needs below, above or both")
+        for name, value in (("below", self.below), ("above", self.above)):
+            _check(value is None or math.isfinite(value), name, "must be finite")
+        _check(self.below is None or self.above is None or self.below < self.above, "above",
+               "above must exceed below")
+
+
+@dataclass(frozen=True)
 class Criterion:
-    """An unfavourable-state criterion: its name and where the reviser searches against it."""
+    """An unfavourable-state criterion: its name, where the reviser searches against it, and
+    where its failures lie, if known (:class:`Bound`)."""
 
     name: str
     direction: Direction
+    bound: Bound | None = None
 
     def __post_init__(self) -> None:
         _check(bool(self.name), "name", "a criterion needs a name")
@@ -154,8 +179,11 @@ class Criterion:
 
 
 PAPER_CRITERIA = (
-    Criterion("collision", "decrease"),  # l_s: slow down against a crash
-    Criterion("large_distance", "increase"),  # l_ld: speed up against falling behind
+    # l_s: slow down against a crash, at a headway of 0
+    Criterion("collision", "decrease", Bound("headway", below=0.0)),
+    # l_ld: speed up against falling behind (beyond 200 m; bounded, every path's worst case
+    # would fall behind within the reach's horizon, and braking would read as risky)
+    Criterion("large_distance", "increase"),
 )
 
 
@@ -313,6 +341,16 @@ class ShieldConfig:
     def __post_init__(self) -> None:
         names = [c.name for c in self.criteria]
         _check(len(set(names)) == len(names), "criteria", "criterion names must be unique")
+        observed = self.observation.names
+        for i, criterion in enumerate(self.criteria):
+            if criterion.bound is None:
+                continue
+            _check(criterion.bound.observation in observed, f"criteria.{i}.bound.observation",
+                   f"{criterion.bound.observation!r} is not an observation name "
+                   f"({', '.join(observed)}); a custom observation declares its own criteria")
+            _check(self.observation.cluster_raw, f"criteria.{i}.bound",
+                   "a bound needs the observation clustered (observation.cluster_raw); "
+                   "declare the criteria without bounds")
 
     @classmethod
     def paper(cls, **overrides: Any) -> ShieldConfig:
@@ -380,10 +418,12 @@ class ShieldConfig:
             data = _from_version_2(data)
         if version in (1, 2, 3):
             data = _from_version_3(data)
+        if version in (1, 2, 3, 4):
+            data = _from_version_4(data)
         return cls.from_dict(data)
 
 
-CONFIG_VERSION = 4
+CONFIG_VERSION = 5
 
 
 def _from_version_1(data: Mapping[str, Any]) -> dict[str, Any]:
@@ -443,6 +483,17 @@ def _from_version_3(data: Mapping[str, Any]) -> dict[str, Any]:
     risk_section = out.setdefault("risk", {})
     if method == "risk" and isinstance(risk_section, dict):
         risk_section.setdefault("reach_horizon", 0)
+    out["version"] = 4
+    return out
+
+
+def _from_version_4(data: Mapping[str, Any]) -> dict[str, Any]:
+    """Version 4 to 5: criteria may declare a bound (:class:`Bound`), and the default ones
+    do. A configuration written before decided without bounds: one that left its criteria
+    out gets the paper's without them (one that lists them lacks bounds already)."""
+    out = _copy(data)
+    out.setdefault("criteria", [{"name": c.name, "direction": c.direction}
+                                for c in PAPER_CRITERIA])
     out["version"] = CONFIG_VERSION
     return out
 
@@ -494,6 +545,11 @@ def _build(cls: type[T], data: Any, path: str) -> T:
 
 def _convert(hint: Any, value: Any, path: str) -> Any:
     origin = get_origin(hint)
+    if origin is UnionType and type(None) in get_args(hint):  # an optional field
+        if value is None:
+            return None
+        (inner,) = (a for a in get_args(hint) if a is not type(None))
+        return _convert(inner, value, path)
     if dataclasses.is_dataclass(hint):
         return _build(hint, value, path)  # type: ignore[arg-type]
     if origin is tuple:

@@ -74,11 +74,13 @@ class LocalRisk:
 
     def __init__(self, dim: int, n_criteria: int, n_bins: int, horizon: int,
                  max_states: int, belief_size: int, max_streams: int, reach_horizon: int = 0,
-                 reach_radius: float = 0.05) -> None:
+                 reach_radius: float = 0.05, bounds: FloatArray | None = None) -> None:
         self.dim, self.n_criteria, self.n_bins = dim, n_criteria, n_bins
         self.horizon, self.max_states, self.belief_size = horizon, max_states, belief_size
         self.max_streams = max_streams
         self.reach_horizon, self.reach_radius = reach_horizon, reach_radius
+        # per criterion its bound in the clustering space (reach.no_bounds: none)
+        self.bounds = reach.no_bounds(n_criteria) if bounds is None else bounds
         self.size = dim + 2  # [1, z, u]
         self._n = 0
         self._theta = np.zeros((0, n_criteria, self.size))
@@ -97,6 +99,7 @@ class LocalRisk:
         # the dynamics per state (dimension x [1, z, u]) and the failures seen (app.core.reach)
         self._dynamics = np.zeros((0, dim, self.size))
         self._dynamics_cov = np.zeros((0, self.size, self.size))
+        self._spread = np.zeros((0, dim))  # the mean square of each dimension's one-step error
         self._points = np.zeros((n_criteria, reach.MAX_POINTS, dim))
         self._point_counts = np.zeros((n_criteria, 2), dtype=np.int64)  # kept, next slot
         self._arrays: tuple[Any, ...] | None = None  # see arrays
@@ -124,6 +127,8 @@ class LocalRisk:
         self._dynamics_cov = ensure_capacity(self._dynamics_cov, n + 1, self.max_states)
         self._dynamics[n] = 0.0
         self._dynamics_cov[n] = np.eye(self.size) * PRIOR_COV
+        self._spread = ensure_capacity(self._spread, n + 1, self.max_states)
+        self._spread[n] = 0.0
         self._tried[n] = 0
         self._low = ensure_capacity(self._low, n + 1, self.max_states)
         self._high = ensure_capacity(self._high, n + 1, self.max_states)
@@ -161,21 +166,23 @@ class LocalRisk:
         point of criterion ``failure``, if one. What a shield's step learns in its compiled
         call, for a model built by hand."""
         phi = np.array([1.0, *before, self.midpoints[action_bin]])
-        reach.learn(self._dynamics, self._dynamics_cov, belief.index, belief.prob, phi, after)
+        reach.learn(self._dynamics, self._dynamics_cov, self._spread, belief.index,
+                    belief.prob, phi, after)
         if failure is not None:
             reach.add_failure(self._points, self._point_counts, failure, after,
                               self.reach_radius)
 
     def arrays(self) -> tuple[Any, ...]:
         """What a compiled step learns and decides with (:func:`learn_step`'s arrays, in
-        order, then the reach's: the dynamics, their covariances, the failure points and their
-        counts): the same tuple until a state is added or a new slot reserved."""
+        order, then the reach's: the dynamics, their covariances and spreads, the failure
+        points, their counts and the bounds): the same tuple until a state is added or a new
+        slot reserved."""
         if self._arrays is None:
             self._arrays = (self._theta, self._cov, self._tried, self._low, self._high,
                             self.midpoints, self._queue_index, self._queue_prob,
                             self._queue_phi, self._queue_ends, self.failures,
-                            self._dynamics, self._dynamics_cov, self._points,
-                            self._point_counts)
+                            self._dynamics, self._dynamics_cov, self._spread, self._points,
+                            self._point_counts, self.bounds)
         return self._arrays
 
     def pending(self, slot: int) -> int:
@@ -214,8 +221,9 @@ class LocalRisk:
         and ``verdicts`` each bin's verdict; one compiled call."""
         return decide_step(self._theta, self._tried, self._low, self._high, belief.index,
                            belief.prob, z, self.midpoints, safe, proposed_bin, threshold,
-                           margin, by_bin, verdicts, self._dynamics, self._points,
-                           self._point_counts, self.reach_horizon, self.reach_radius)
+                           margin, by_bin, verdicts, self._dynamics, self._spread,
+                           self._points, self._point_counts, self.bounds, self.reach_horizon,
+                           self.reach_radius)
 
     def snapshot(self, slots: Mapping[str, int]) -> dict[str, Any]:
         """Exact state as arrays: the weights, their covariances, the bins' boxes, the
@@ -240,6 +248,7 @@ class LocalRisk:
                 "tried": self.tried.copy(), **self._boxes(),
                 "failures": self.failures.copy(), "dynamics": self._dynamics[: self._n].copy(),
                 "dynamics_cov": self._dynamics_cov[: self._n].copy(),
+                "spread": self._spread[: self._n].copy(),
                 "points": self._points.copy(), "point_counts": self._point_counts.copy(),
                 "streams": names,
                 "lengths": np.array(lengths, dtype=np.int64),
@@ -261,7 +270,7 @@ class LocalRisk:
         one), checking every part; ``slots`` gives each stream of the model its slot."""
         self = cls(shape.dim, shape.n_criteria, shape.n_bins, shape.horizon,
                    shape.max_states, shape.belief_size, shape.max_streams,
-                   shape.reach_horizon, shape.reach_radius)
+                   shape.reach_horizon, shape.reach_radius, shape.bounds)
         dim, n_criteria, n_bins, m = self.dim, self.n_criteria, self.n_bins, self.size
         theta = stored.floats(data["theta"], "local_risk.theta", (n_states, n_criteria, m))
         # the covariance only shrinks from PRIOR_COV * I as steps are fitted
@@ -287,11 +296,16 @@ class LocalRisk:
         return self
 
     def _restore_reach(self, n_states: int, data: dict[str, Any]) -> None:
-        """The dynamics and failure points (a snapshot from before them: none learned)."""
+        """The dynamics, their spreads and the failure points (a snapshot from before them:
+        none learned)."""
         m, shape = self.size, (n_states, self.dim, self.size)
         self._dynamics = np.zeros(shape)
         self._dynamics_cov = np.zeros((n_states, m, m))
         self._dynamics_cov[:] = np.eye(m) * PRIOR_COV
+        self._spread = np.zeros((n_states, self.dim))
+        if "spread" in data:
+            self._spread = stored.floats(data["spread"], "local_risk.spread",
+                                         self._spread.shape, low=0.0).copy()
         if "dynamics" not in data:
             return
         self._dynamics = stored.floats(data["dynamics"], "local_risk.dynamics", shape).copy()
@@ -442,8 +456,9 @@ def decide_step(theta: FloatArray, tried: IntArray, low: FloatArray, high: Float
                 index: IntArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
                 safe: IntArray, proposed_bin: int, threshold: float, margin: float,
                 by_bin: FloatArray, verdicts: IntArray, dynamics: FloatArray,
-                points: FloatArray, point_counts: IntArray, reach_horizon: int,
-                reach_radius: float) -> tuple[float, int, int, bool]:
+                spread: FloatArray, points: FloatArray, point_counts: IntArray,
+                bounds: FloatArray, reach_horizon: int, reach_radius: float
+                ) -> tuple[float, int, int, bool]:
     """:meth:`LocalRisk.decide` on its arrays: :func:`_read` and the reach
     (:func:`app.core.reach.risk`), each under the monotone prior, and the decision on both
     (:func:`app.core.risk.decide_with_reach`)."""
@@ -451,8 +466,8 @@ def decide_step(theta: FloatArray, tried: IntArray, low: FloatArray, high: Float
     risk.monotone(by_bin, safe)
     reached = np.zeros(by_bin.shape)
     if reach_horizon > 0:
-        reach.risk(dynamics, index, prob, z, midpoints, safe, points, point_counts,
-                   reach_horizon, reach_radius, reached)
+        reach.risk(dynamics, spread, index, prob, z, midpoints, safe, points, point_counts,
+                   bounds, reach_horizon, reach_radius, reached)
         risk.monotone(reached, safe)
     return risk.decide_with_reach(by_bin, reached, proposed_bin, threshold, margin, safe,
                                   verdicts)

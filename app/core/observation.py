@@ -49,6 +49,14 @@ class ObservationSpace:
         normalise(observation, self.raw, self.scales, self.features, z)
         return z
 
+    def along(self, dimension: int, value: float) -> float:
+        """Where ``value`` of the observation's ``dimension`` lies in the clustering space
+        (the raw observation's dimensions are scaled one by one, so the others, 0 here, do
+        not matter)."""
+        x = np.zeros(self.dim)
+        x[dimension] = value
+        return float(self.normalise(x)[dimension])
+
     def physical(self, z: FloatArray) -> FloatArray:
         """The clustering space back to physical units: the observation (the inverse of
         :meth:`normalise`) where it is clustered, then each feature's value."""

@@ -18,6 +18,16 @@ dynamics carry no confound of the controller's choices.
 **Failures.** Each criterion keeps up to :data:`MAX_POINTS` observations where its failures were
 reported (a new one within half the radius of a kept one adds nothing).
 
+**Bounds.** A criterion may declare where its failures lie (a :class:`~app.core.config.Bound`:
+one observation at or below a value, or at or above one). Each state keeps the running mean
+square of each dimension's one-step error (its *spread*); a one-step disturbance of up to
+:data:`KAPPA` root mean squares a dimension, carried through the blended dynamics
+(``sum_s |e_b A^s| w`` after s steps, ``A = I + W_z``), is the path's worst case on the bound's
+dimension. An action fails the bound at the first step where that worst case crosses it, and
+its risk is the earlier the higher, ``1 - t / horizon``: the action that puts a crossing off the
+longest is the safest, also where no action avoids it (where the closeness to points saturates
+and cannot tell the actions apart).
+
 **Reach.** For an action bin a and criterion c the belief's models are blended into one at the
 current observation and rolled out for ``horizon`` steps: the first step under a, every later
 one under c's safest bin (its safe end of the action range). The risk is the largest closeness
@@ -41,17 +51,39 @@ IntArray = npt.NDArray[np.int64]
 
 MAX_POINTS = 64  # failure observations kept per criterion
 MIN_WEIGHT = 1e-3  # belief weights below this do not update a state's dynamics
+SPREAD_RATE = 0.02  # rate of each state's running mean square one-step error
+KAPPA = 2.0  # a step's disturbance bound, in root mean square one-step errors
+
+
+def no_bounds(n_criteria: int) -> FloatArray:
+    """The bounds of criteria that declare none, in :func:`risk`'s layout: per criterion the
+    bound's dimension (-1: none), the value at or below which it fails and the value at or
+    above which it fails (clustering space)."""
+    bounds = np.empty((n_criteria, 3))
+    bounds[:, 0], bounds[:, 1], bounds[:, 2] = -1.0, -math.inf, math.inf
+    return bounds
 
 
 @njit(cache=True)
-def learn(dynamics: FloatArray, cov: FloatArray, index: IntArray, prob: FloatArray,
-          phi: FloatArray, z: FloatArray) -> None:
+def learn(dynamics: FloatArray, cov: FloatArray, spread: FloatArray, index: IntArray,
+          prob: FloatArray, phi: FloatArray, z: FloatArray) -> None:
     """One transition into the dynamics of the states of the belief it left from (``index``,
-    ``prob``; ``phi = [1, z_before, u]``, ``z`` after): weighted recursive least squares on the
-    change ``z - z_before``, every dimension sharing the state's covariance."""
-    change = np.empty(z.shape[0])
-    for k in range(z.shape[0]):
+    ``prob``; ``phi = [1, z_before, u]``, ``z`` after): each state's spread moves towards the
+    square of its model's error on it (by the state's weight), then weighted recursive least
+    squares on the change ``z - z_before``, every dimension sharing the state's covariance."""
+    d = z.shape[0]
+    change = np.empty(d)
+    for k in range(d):
         change[k] = z[k] - phi[k + 1]
+    for t in range(index.shape[0]):
+        i, weight = index[t], prob[t]
+        if weight < MIN_WEIGHT:
+            continue
+        for k in range(d):
+            error = change[k]
+            for r in range(phi.shape[0]):
+                error -= dynamics[i, k, r] * phi[r]
+            spread[i, k] += SPREAD_RATE * weight * (error * error - spread[i, k])
     weighted_rls(dynamics, cov, index, prob, phi, change, MIN_WEIGHT)
 
 
@@ -104,26 +136,34 @@ def _closest(points: FloatArray, kept: int, c: int, p: FloatArray, v: FloatArray
 
 
 @njit(cache=True)
-def risk(dynamics: FloatArray, index: IntArray, prob: FloatArray, z: FloatArray,
-         midpoints: FloatArray, safe: IntArray, points: FloatArray, counts: IntArray,
-         horizon: int, radius: float, out: FloatArray) -> None:
+def risk(dynamics: FloatArray, spread: FloatArray, index: IntArray, prob: FloatArray,
+         z: FloatArray, midpoints: FloatArray, safe: IntArray, points: FloatArray,
+         counts: IntArray, bounds: FloatArray, horizon: int, radius: float,
+         out: FloatArray) -> None:
     """``out`` (bins x criteria): each action's reach risk at ``z`` under the belief
-    (``index``, ``prob``), see the module docstring; 0 for a criterion without failures.
-    Each step of the path is checked against the failure points only where the segment of
-    all bins' points comes within the failures' box widened by the radius."""
+    (``index``, ``prob``), see the module docstring: the larger of its closeness to the
+    failure points and, for a criterion with a bound (``bounds``, :func:`no_bounds`), how
+    early its worst case crosses the bound; 0 for a criterion with neither. Each step of the
+    path is checked against the failure points only where the segment of all bins' points
+    comes within the failures' box widened by the radius."""
     d, q = z.shape[0], midpoints.shape[0]
     model = np.zeros((d, d + 2))  # the belief's blend of its states' dynamics
+    disturbance = np.zeros(d)  # and of their spreads, as a bound on one step's error
     for t in range(index.shape[0]):
         for k in range(d):
+            disturbance[k] += prob[t] * spread[index[t], k]
             for r in range(d + 2):
                 model[k, r] += prob[t] * dynamics[index[t], k, r]
+    for k in range(d):
+        disturbance[k] = KAPPA * math.sqrt(disturbance[k])
     p, v, step = np.empty(d), np.empty(d), np.empty(d)
     low, high, nearest = np.empty(d), np.empty(d), np.empty(q)
+    sensitivity, turned = np.empty(d), np.empty(d)
     u_low, u_high = midpoints[0], midpoints[q - 1]
     for c in range(safe.shape[0]):
-        kept = counts[c, 0]
+        kept, b = counts[c, 0], int(bounds[c, 0])
         out[:, c] = 0.0
-        if kept == 0:
+        if kept == 0 and b < 0:
             continue
         low[:] = math.inf
         high[:] = -math.inf
@@ -138,8 +178,26 @@ def risk(dynamics: FloatArray, index: IntArray, prob: FloatArray, z: FloatArray,
                 p[k] += model[k, r + 1] * z[r]
             v[k] = model[k, d + 1]
         u_safe = midpoints[0 if safe[c] < 0 else q - 1]
-        for _ in range(horizon):
-            inside = True
+        # the worst case on the bound's dimension: |e_b A^s| . disturbance, summed over s
+        sensitivity[:] = 0.0
+        if b >= 0:
+            sensitivity[b] = 1.0
+        worst = 0.0
+        for t in range(horizon):
+            if b >= 0:
+                for r in range(d):
+                    worst += abs(sensitivity[r]) * disturbance[r]
+                for r in range(d):
+                    turned[r] = sensitivity[r]
+                    for k in range(d):
+                        turned[r] += sensitivity[k] * model[k, r + 1]
+                sensitivity[:] = turned
+                crossing = 1.0 - t / horizon
+                for a in range(q):
+                    x = p[b] + v[b] * midpoints[a]
+                    if x - worst <= bounds[c, 1] or x + worst >= bounds[c, 2]:
+                        out[a, c] = max(out[a, c], crossing)
+            inside = kept > 0
             for r in range(d):
                 first, last = p[r] + v[r] * u_low, p[r] + v[r] * u_high
                 if max(first, last) < low[r] or min(first, last) > high[r]:

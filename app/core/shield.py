@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from app.core import _stored as stored
-from app.core import actions, reviser, risk
+from app.core import actions, reach, reviser, risk
 from app.core.belief import Belief, recognise
 from app.core.clustering import NEW, REPLACED, STATES, EvolvingClusterer
 from app.core.config import ShieldConfig, TransitionConfig
@@ -253,7 +253,25 @@ class Shield:
             return None
         return LocalRisk(self.space.size, len(cfg.criteria), cfg.action.n_bins,
                          cfg.risk.horizon, cfg.limits.max_states, cfg.limits.belief_top_k,
-                         cfg.limits.max_streams, cfg.risk.reach_horizon, cfg.risk.reach_radius)
+                         cfg.limits.max_streams, cfg.risk.reach_horizon, cfg.risk.reach_radius,
+                         self._bounds())
+
+    def _bounds(self) -> FloatArray:
+        """The criteria's bounds in the clustering space (:func:`app.core.reach.no_bounds`'s
+        layout)."""
+        cfg = self.config
+        bounds = reach.no_bounds(len(cfg.criteria))
+        for c, criterion in enumerate(cfg.criteria):
+            bound = criterion.bound
+            if bound is None:
+                continue
+            dimension = cfg.observation.names.index(bound.observation)
+            bounds[c, 0] = dimension
+            if bound.below is not None:
+                bounds[c, 1] = self.space.along(dimension, bound.below)
+            if bound.above is not None:
+                bounds[c, 2] = self.space.along(dimension, bound.above)
+        return bounds
 
     def _new_transitions(self) -> TransitionModel:
         cfg = self.config

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from app.core import ActionSpec, Criterion, ObservationSpec, ShieldConfig
+from app.core import ActionSpec, Bound, Criterion, ObservationSpec, ShieldConfig
 from bench.worlds.harness import World
 
 DT = 0.1  # [s]
@@ -83,7 +83,10 @@ CONFIG = ShieldConfig(
     observation=ObservationSpec(names=("gap", "v_ego", "v_lead"), low=(0.0, 0.0, 0.0),
                                 high=(150.0, 35.0, 35.0), knee=()),
     action=ActionSpec(low=A_LOW, high=A_HIGH, step=0.5),
-    criteria=(Criterion("collision", "decrease"), Criterion("lost", "increase")),
+    # the collision's bound declared, as the car-following default does (and not the lost
+    # lead's, as the default does not bound falling behind)
+    criteria=(Criterion("collision", "decrease", Bound("gap", below=0.0)),
+              Criterion("lost", "increase")),
 )
 
 WORLD = World(name="braking-lead", make=lambda seed: BrakingLead(), controller=LateController,

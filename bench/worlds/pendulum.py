@@ -14,7 +14,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from app.core import ActionSpec, Criterion, ObservationSpec, ShieldConfig
+from app.core import ActionSpec, Bound, Criterion, ObservationSpec, ShieldConfig
 from bench.worlds.harness import World
 
 LIMIT = 6.0  # [rad/s]
@@ -43,7 +43,8 @@ CONFIG = ShieldConfig(
     observation=ObservationSpec(names=("cos", "sin", "theta_dot"), low=(-1.0, -1.0, -8.0),
                                 high=(1.0, 1.0, 8.0), knee=()),
     action=ActionSpec(low=-2.0, high=2.0, step=0.2),
-    criteria=(Criterion("overspeed_ccw", "decrease"), Criterion("overspeed_cw", "increase")),
+    criteria=(Criterion("overspeed_ccw", "decrease", Bound("theta_dot", above=LIMIT)),
+              Criterion("overspeed_cw", "increase", Bound("theta_dot", below=-LIMIT))),
 )
 
 WORLD = World(name="pendulum-overspeed", make=lambda seed: gym.make("Pendulum-v1"),

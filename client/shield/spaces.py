@@ -15,7 +15,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from app.core import ActionSpec, Criterion, ObservationSpec, ShieldConfig
+from app.core import ActionSpec, Bound, Criterion, ObservationSpec, ShieldConfig
 
 DEFAULT_BINS = 20
 AnyEnv = gym.Env[Any, Any] | gym.vector.VectorEnv[Any, Any, Any]
@@ -65,7 +65,7 @@ def own_config(env: AnyEnv) -> ShieldConfig | None:
     return own() if callable(own) else None
 
 
-def config_for(env: AnyEnv, criteria: Mapping[str, str] | None = None, *,
+def config_for(env: AnyEnv, criteria: Mapping[str, str | tuple[str, Bound]] | None = None, *,
                bins: int = DEFAULT_BINS, low: Sequence[float] | None = None,
                high: Sequence[float] | None = None, base: ShieldConfig | None = None
                ) -> ShieldConfig:
@@ -75,8 +75,10 @@ def config_for(env: AnyEnv, criteria: Mapping[str, str] | None = None, *,
     environment, as ``CarFollowing-v0`` has) gives its own. Otherwise the observation's Box
     bounds (or ``low``/``high`` where they are infinite) normalise the observation, the action
     range is cut into ``bins`` bins, and ``criteria`` names each failure with the direction
-    of the action that moves away from it: ``{"crash": "decrease"}`` (slower is safer).
-    Everything else is ``base`` (default: the shield's defaults).
+    of the action that moves away from it: ``{"crash": "decrease"}`` (slower is safer), and,
+    where a failure is one observation number crossing a value, where it fails:
+    ``{"crash": ("decrease", Bound("x0", below=0.0))}`` (the observation's numbers are named
+    ``x0``, ``x1``, ...). Everything else is ``base`` (default: the shield's defaults).
     """
     action_space, space = spaces(env)
     action = one_dimensional(action_space)
@@ -111,8 +113,8 @@ def config_for(env: AnyEnv, criteria: Mapping[str, str] | None = None, *,
                                     low=tuple(lows.tolist()), high=tuple(highs.tolist()),
                                     knee=()),
         action=ActionSpec(low=a_low, high=a_high, step=(a_high - a_low) / bins),
-        criteria=tuple(Criterion(name, direction)  # type: ignore[arg-type]
-                       for name, direction in criteria.items()),
+        criteria=tuple(Criterion(name, *((how,) if isinstance(how, str) else how))
+                       for name, how in criteria.items()),
     )
 
 

@@ -12,7 +12,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from app.core import ReviserConfig, ShieldConfig
+from app.core import Bound, InvalidConfig, ReviserConfig, ShieldConfig
 from client.shield import LocalShield, ShieldWrapper, SpaceMismatch, config_for
 from client.sim.car_following import CarFollowingEnv
 from client.sim.lead import synthetic
@@ -93,6 +93,12 @@ def test_config_for_reads_the_spaces_and_asks_for_what_they_cannot_say() -> None
     assert config.observation.low == (-1.0, -1.0, -8.0)
     assert (config.action.low, config.action.high, config.action.n_bins) == (-2.0, 2.0, 20)
     assert [c.name for c in config.criteria] == ["overspeed_cw", "overspeed_ccw"]
+    bounded = config_for(pendulum, {"overspeed_cw": ("increase", Bound("x2", below=-6.0)),
+                                    "overspeed_ccw": "decrease"})
+    assert [c.bound for c in bounded.criteria] == [Bound("x2", below=-6.0), None]
+    with pytest.raises(InvalidConfig) as refused:
+        config_for(pendulum, {"overspeed_cw": ("increase", Bound("theta_dot", below=-6.0))})
+    assert refused.value.field == "criteria.0.bound.observation"
     unbounded = gym.make("MountainCarContinuous-v0")
     unbounded.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(2,))
     with pytest.raises(SpaceMismatch, match=r"dimensions \[0, 1\] are unbounded"):

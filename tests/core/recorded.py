@@ -22,10 +22,13 @@ from app.core import RiskConfig, Shield, ShieldConfig
 DATA = Path(__file__).parent.parent / "data"
 STEPS = 12_000
 EPISODE = 400  # steps before an episode ends without a failure
+# the default criteria without their bounds, as before bounds were declared
+UNBOUNDED = tuple(dataclasses.replace(c, bound=None) for c in ShieldConfig().criteria)
 PRESETS = {"default": ShieldConfig, "paper": ShieldConfig.paper,
-           # the default before the reach (recorded by the core at 6f6cc72, again when the
-           # risk reviser's end bins began applying the range's ends)
-           "no-reach": lambda: ShieldConfig(risk=RiskConfig(reach_horizon=0))}
+           # the default before the reach and its bounds (recorded by the core at 6f6cc72,
+           # again when the risk reviser's end bins began applying the range's ends)
+           "no-reach": lambda: ShieldConfig(criteria=UNBOUNDED,
+                                            risk=RiskConfig(reach_horizon=0))}
 
 
 def preset(name: str) -> ShieldConfig:

@@ -8,6 +8,8 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
+from app.core.reach import KAPPA
+
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
@@ -88,16 +90,31 @@ def cluster(state: dict[str, FloatArray], z: FloatArray, epsilon: float, rho: fl
 
 
 def reach(dynamics: FloatArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
-          safe_bin: int, points: FloatArray, horizon: int, radius: float) -> FloatArray:
+          safe_bin: int, points: FloatArray, horizon: int, radius: float,
+          spread: FloatArray | None = None,
+          bound: tuple[int, float, float] | None = None) -> FloatArray:
     """Each bin's reach risk for one criterion (app.core.reach): the belief's blend of the
     states' dynamics, one step under the bin, then ``horizon - 1`` under ``safe_bin``, each
-    point's closeness ``max(0, 1 - distance / radius)`` to the nearest failure point."""
+    point's closeness ``max(0, 1 - distance / radius)`` to the nearest failure point; with a
+    ``bound`` (dimension, below, above) and the states' ``spread``, ``1 - t / horizon`` at
+    the first step t where the path, widened by the disturbance carried by the matrix powers
+    of ``A = I + W_z``, crosses it."""
+    d = z.shape[0]
     model = np.einsum("i,ikr->kr", prob, dynamics)
+    a_matrix = np.eye(d) + model[:, 1:d + 1]
+    disturbance = KAPPA * np.sqrt(prob @ spread) if spread is not None else np.zeros(d)
     out = np.zeros(midpoints.shape[0])
     for a, u in enumerate(midpoints):
         x = z.copy()
         for t in range(horizon):
             x = x + model @ np.concatenate(([1.0], x, [u if t == 0 else midpoints[safe_bin]]))
-            distance = np.sqrt(((points - x) ** 2).sum(axis=1)).min()
-            out[a] = max(out[a], 1.0 - distance / radius)
+            if points.shape[0]:
+                distance = np.sqrt(((points - x) ** 2).sum(axis=1)).min()
+                out[a] = max(out[a], 1.0 - distance / radius)
+            if bound is not None:
+                b, below, above = bound
+                worst = sum(np.abs(np.linalg.matrix_power(a_matrix, s)[b]) @ disturbance
+                            for s in range(t + 1))
+                if x[b] - worst <= below or x[b] + worst >= above:
+                    out[a] = max(out[a], 1.0 - t / horizon)
     return out

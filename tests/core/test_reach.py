@@ -18,6 +18,7 @@ SAFE = np.array([-1, 1], dtype=np.int64)  # collision-like, then falling-behind-
 def test_the_dynamics_are_weighted_ridge_least_squares_on_the_changes() -> None:
     rng = np.random.default_rng(0)
     dynamics, cov = np.zeros((2, 2, 4)), np.stack([np.eye(4) * PRIOR_COV] * 2)
+    spread = np.zeros((2, 2))
     truth = rng.normal(0, 0.3, (2, 4))
     rows, changes, weights = [], [], []
     for _ in range(100):
@@ -25,7 +26,8 @@ def test_the_dynamics_are_weighted_ridge_least_squares_on_the_changes() -> None:
         phi = np.array([1.0, *before, u])
         after = before + truth @ phi + rng.normal(0, 0.01, 2)
         # the second state's weight is below the floor: it learns nothing
-        reach.learn(dynamics, cov, np.array([0, 1]), np.array([weight, 1e-4]), phi, after)
+        reach.learn(dynamics, cov, spread, np.array([0, 1]), np.array([weight, 1e-4]), phi,
+                    after)
         rows.append(phi)
         changes.append(after - before)
         weights.append(weight)
@@ -35,25 +37,59 @@ def test_the_dynamics_are_weighted_ridge_least_squares_on_the_changes() -> None:
     assert np.allclose(dynamics[0], expected, atol=1e-9)
     assert np.allclose(dynamics[0], truth, atol=0.02)
     assert not dynamics[1].any() and np.array_equal(cov[1], np.eye(4) * PRIOR_COV)
+    assert not spread[1].any()
+
+
+def test_the_spread_is_the_running_mean_square_of_the_one_step_error() -> None:
+    rng = np.random.default_rng(1)
+    dynamics, cov = np.zeros((1, 1, 3)), np.eye(3)[None] * PRIOR_COV
+    spread = np.zeros((1, 1))
+    for _ in range(3000):
+        before, u = rng.uniform(0, 1, 1), rng.uniform(0, 1)
+        after = before + 0.1 - 0.2 * u + rng.normal(0, 0.05, 1)
+        reach.learn(dynamics, cov, spread, np.array([0]), np.array([1.0]),
+                    np.array([1.0, *before, u]), after)
+    assert spread[0, 0] == pytest.approx(0.05 ** 2, rel=0.3)  # the noise's variance
 
 
 def test_a_path_towards_a_failure_is_risky_and_one_away_from_it_is_not() -> None:
     # one dimension: z' - z = -0.2 + 0.4 u, so the slow bin (u 0.25) moves down by 0.1 a
     # step and the fast one (u 0.75) up by 0.1; a failure seen at 0.15
-    dynamics = np.array([[[-0.2, 0.0, 0.4]]])
+    dynamics, spread = np.array([[[-0.2, 0.0, 0.4]]]), np.zeros((1, 1))
     points = np.zeros((1, reach.MAX_POINTS, 1))
     points[0, 0, 0] = 0.15
     counts = np.array([[1, 1]])
     out = np.empty((2, 1))
     for safe, expected in ((np.array([-1]), [0.5, 0.0]),  # safe: slow (down from 0.6)
                            (np.array([1]), [0.0, 0.0])):  # safe: fast, back up after one
-        reach.risk(dynamics, np.array([0]), np.array([1.0]), np.array([0.5]),
-                   np.array([0.25, 0.75]), safe, points, counts, 3, 0.1, out)
+        reach.risk(dynamics, spread, np.array([0]), np.array([1.0]), np.array([0.5]),
+                   np.array([0.25, 0.75]), safe, points, counts, reach.no_bounds(1), 3, 0.1,
+                   out)
         # slow first, then 3 steps: 0.4, 0.3, 0.2 (0.05 from the failure: half the radius)
         assert out[:, 0] == pytest.approx(expected)
-    reach.risk(dynamics, np.array([0]), np.array([1.0]), np.array([0.5]),
-               np.array([0.25, 0.75]), np.array([-1]), points, np.array([[0, 0]]), 3, 0.1, out)
-    assert not out.any()  # no failure seen: no risk
+    reach.risk(dynamics, spread, np.array([0]), np.array([1.0]), np.array([0.5]),
+               np.array([0.25, 0.75]), np.array([-1]), points, np.array([[0, 0]]),
+               reach.no_bounds(1), 3, 0.1, out)
+    assert not out.any()  # no failure seen and no bound: no risk
+
+
+@pytest.mark.parametrize(("error", "expected"), [(0.15, [1 / 6, 5 / 6]), (0.0, [0.0, 0.0])])
+def test_a_bound_fails_an_action_at_its_worst_cases_first_crossing(
+        error: float, expected: list[float]) -> None:
+    # z' - z = -0.2 + 0.4 u: the slow bin (u 0.25, the safe one) moves down by 0.1 a step,
+    # the fast one up by 0.1; failures at or above 0.8, no failure point seen. A step's
+    # disturbance of ``error`` (KAPPA root mean squares) adds up: (t + 1) * error after t.
+    # Fast first: 0.6, then 0.5 + 0.3 = 0.8 at t = 1; slow: 0.4 - 0.1 t + 0.15 (t + 1)
+    # reaches 0.8 at t = 5; horizon 6. Without a disturbance neither path gets there.
+    dynamics = np.array([[[-0.2, 0.0, 0.4]]])
+    spread = np.array([[(error / reach.KAPPA) ** 2]])
+    bounds = reach.no_bounds(1)
+    bounds[0, 0], bounds[0, 2] = 0, 0.8
+    out = np.empty((2, 1))
+    reach.risk(dynamics, spread, np.array([0]), np.array([1.0]), np.array([0.5]),
+               np.array([0.25, 0.75]), np.array([-1]), np.zeros((1, reach.MAX_POINTS, 1)),
+               np.array([[0, 0]]), bounds, 6, 0.1, out)
+    assert out[:, 0] == pytest.approx(expected)
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -61,16 +97,21 @@ def test_the_reach_kernel_gives_the_reference_rollouts(seed: int) -> None:
     rng = np.random.default_rng(seed)
     d, q, n, horizon, radius = 3, 7, 4, 12, 0.3
     dynamics = rng.normal(0, 0.1, (n, d, d + 2))
+    spread = rng.uniform(0, 0.01, (n, d))
     index, prob = np.array([0, 2, 3]), rng.dirichlet(np.ones(3))
     z, midpoints = rng.uniform(0, 1, d), (np.arange(q) + 0.5) / q
     points = np.zeros((2, reach.MAX_POINTS, d))
     points[:, :5] = rng.uniform(0, 1, (2, 5, d))
+    # the first criterion fails at or below 0.1 of a random dimension, the second has no bound
+    bounds, b = reach.no_bounds(2), int(rng.integers(d))
+    bounds[0, 0], bounds[0, 1] = b, 0.1
     out = np.empty((q, 2))
-    reach.risk(dynamics, index, prob, z, midpoints, SAFE, points, np.array([[5, 5], [5, 5]]),
-               horizon, radius, out)
+    reach.risk(dynamics, spread, index, prob, z, midpoints, SAFE, points,
+               np.array([[5, 5], [5, 5]]), bounds, horizon, radius, out)
     for c, safe_bin in enumerate((0, q - 1)):
         expected = reference.reach(dynamics[index], prob, z, midpoints, safe_bin,
-                                   points[c, :5], horizon, radius)
+                                   points[c, :5], horizon, radius, spread[index],
+                                   (b, 0.1, np.inf) if c == 0 else None)
         assert out[:, c] == pytest.approx(expected, abs=1e-12)
 
 
@@ -140,6 +181,30 @@ def test_a_shield_learns_dynamics_and_failure_points_and_snapshots_them() -> Non
                 == shield.step(observation, action).to_dict())
 
 
+def test_bounds_lie_in_the_clustering_space() -> None:
+    shield = Shield(ShieldConfig())  # the collision's bound: a headway of 0
+    assert shield.local_risk is not None
+    assert shield.local_risk.bounds.tolist() == [[1.0, 0.0, np.inf], [-1.0, -np.inf, np.inf]]
+    both = [{"name": "near", "direction": "decrease", "bound": {"observation": "headway",
+                                                                "below": 5.0, "above": 200.0}}]
+    shield = Shield(ShieldConfig.from_dict({"criteria": both}))
+    z = shield.normalise(np.array([0.0, 5.0, 0.0]))[1], shield.normalise(
+        np.array([0.0, 200.0, 0.0]))[1]
+    assert shield.local_risk is not None
+    assert shield.local_risk.bounds.tolist() == [[1.0, z[0], z[1]]]
+
+
+def test_a_snapshot_with_a_negative_spread_is_refused() -> None:
+    shield = Shield(ShieldConfig())
+    crash_world(shield, 20, seed=1)
+    data = shield.snapshot()
+    assert data["local_risk"]["spread"].any()
+    data["local_risk"]["spread"][0, 0] = -1.0
+    with pytest.raises(InvalidSnapshot) as error:
+        Shield.from_snapshot(data)
+    assert error.value.field == "local_risk.spread"
+
+
 def test_a_snapshot_with_a_bad_failure_point_count_is_refused() -> None:
     shield = Shield(ShieldConfig())
     crash_world(shield, 20, seed=1)
@@ -164,3 +229,43 @@ def test_a_configuration_stored_before_the_reach_loads_without_it() -> None:
     del stored["risk"]["reach_horizon"], stored["risk"]["reach_radius"]
     assert ShieldConfig.from_stored(stored).risk.reach_horizon == 0
     assert ShieldConfig.from_stored(ShieldConfig().to_dict()).risk.reach_horizon == 40
+
+
+@pytest.mark.parametrize(("criteria", "observation", "field"), [
+    ([{"name": "c", "direction": "decrease", "bound": {"observation": "speed", "below": 0}}],
+     {}, "criteria.0.bound.observation"),
+    ([{"name": "c", "direction": "decrease", "bound": {"observation": "headway"}}],
+     {}, "criteria.0.bound.below"),
+    ([{"name": "c", "direction": "decrease",
+       "bound": {"observation": "headway", "below": 5, "above": 5}}], {},
+     "criteria.0.bound.above"),
+    ([{"name": "c", "direction": "decrease",
+       "bound": {"observation": "headway", "below": "near"}}], {}, "criteria.0.bound.below"),
+    ([{"name": "c", "direction": "decrease", "bound": {"observation": "headway", "below": 0}}],
+     {"cluster_raw": False,
+      "features": [{"name": "gap", "weights": [0, 1, 0], "low": 0, "high": 50}]},
+     "criteria.0.bound"),
+    (None, {"names": ["x"], "low": [0], "high": [1], "knee": []},
+     "criteria.0.bound.observation"),  # the default criteria bound the headway
+])
+def test_bad_bounds_are_refused_naming_the_field(criteria: list | None, observation: dict,
+                                                 field: str) -> None:
+    data: dict = {"observation": observation}
+    if criteria is not None:
+        data["criteria"] = criteria
+    with pytest.raises(InvalidConfig) as error:
+        ShieldConfig.from_dict(data)
+    assert error.value.field == field
+
+
+def test_a_configuration_stored_before_bounds_decides_without_them() -> None:
+    stored = ShieldConfig().to_dict()
+    stored["version"] = 4
+    for criterion in stored["criteria"]:
+        del criterion["bound"]
+    assert all(c.bound is None for c in ShieldConfig.from_stored(stored).criteria)
+    del stored["criteria"]  # the defaults of version 4 had none
+    loaded = ShieldConfig.from_stored(stored)
+    assert [(c.name, c.bound) for c in loaded.criteria] == [("collision", None),
+                                                          ("large_distance", None)]
+    assert ShieldConfig.from_stored(ShieldConfig().to_dict()) == ShieldConfig()

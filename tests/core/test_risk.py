@@ -161,8 +161,10 @@ def test_features_are_clustered_beside_or_instead_of_the_observation() -> None:
     assert z.shape == (5,)
     assert z[3] == pytest.approx((5 + 10) / 20) and z[4] == pytest.approx(1.5 / 4)
     assert beside.normalise(np.array([0.0, 30.0, 0.0]))[4] == 1.0  # 30 / max(0, 1), clipped
+    unbounded = [{"name": "collision", "direction": "decrease"},  # no headway to bound
+                 {"name": "large_distance", "direction": "increase"}]
     alone = Shield(ShieldConfig.from_dict(
-        {"observation": {"features": [closing], "cluster_raw": False}}))
+        {"observation": {"features": [closing], "cluster_raw": False}, "criteria": unbounded}))
     assert alone.normalise(np.array([20.0, 30.0, 15.0])).tolist() == [0.75]
     assert alone.physical(np.array([0.75])).tolist() == [5.0]
 

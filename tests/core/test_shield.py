@@ -252,9 +252,9 @@ def test_a_version_1_configuration_lacking_later_fields_keeps_their_first_values
 
 def test_a_configuration_carries_its_version_and_refuses_another() -> None:
     data = ShieldConfig().to_dict()
-    assert data["version"] == 4 and ShieldConfig.from_dict(data) == ShieldConfig()
+    assert data["version"] == 5 and ShieldConfig.from_dict(data) == ShieldConfig()
     with pytest.raises(InvalidConfig) as raised:
-        ShieldConfig.from_dict({**data, "version": 3})
+        ShieldConfig.from_dict({**data, "version": 4})
     assert raised.value.field == "version"
 
 
