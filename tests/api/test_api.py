@@ -208,7 +208,17 @@ def test_bad_configuration_names_the_field(client: TestClient) -> None:
     assert r.status_code == 422 and r.json()["error"]["field"] == "config.clustering.rho"
     r = client.post("/models", json={"name": "x", "config": {"reviser": {"nois": "std"}}})
     assert r.json()["error"]["field"] == "config.reviser.nois"
+    bound = {"name": "collision", "direction": "decrease",
+             "bound": {"observation": "gap", "below": 0}}
+    r = client.post("/models", json={"name": "x", "config": {"criteria": [bound]}})
+    assert r.status_code == 422
+    assert r.json()["error"]["field"] == "config.criteria.0.bound.observation"
     assert client.get("/models/x").status_code == 404
+    bound["bound"]["observation"] = "headway"
+    r = client.post("/models", json={"name": "x", "config": {"criteria": [bound]}})
+    assert r.status_code in (200, 201)
+    assert client.get("/models/x").json()["config"]["criteria"][0]["bound"] == {
+        "observation": "headway", "below": 0.0, "above": None}
 
 
 @pytest.fixture
