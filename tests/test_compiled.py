@@ -1,12 +1,16 @@
 """The compiled core's cache: ``python -m app warm`` compiles on a cold cache and loads from a
-warm one, and the image build warms it."""
+warm one, the image build warms it, and an edit to any source of the core reaches every kernel
+that calls it."""
 
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+ROOT = Path(__file__).parents[1]
 
 
 def warm(cache: Path) -> str:
@@ -42,3 +46,53 @@ def test_warm_leaves_nothing_to_compile_for_the_presets() -> None:
     grown = [k.py_func.__qualname__ for k in compiled.kernels()
              if len(k.signatures) != before[id(k)]]
     assert grown == []
+
+
+REVISIONS = ("from app.core import Shield, compiled; "
+             "shield = compiled._drive(Shield(compiled.presets()[0])); "
+             "print(sum(shield.counters.interventions.values()))")
+
+
+def test_an_edited_callee_reaches_its_cached_caller(tmp_path: Path) -> None:
+    """A copy of the package, its cache warm; then only ``risk.py`` changes (every action
+    allowed). ``step.learn_and_decide``, whose module did not change, must run the new
+    ``risk.kept_limit``: numba alone would load it from the cache with the old one inside."""
+    shutil.copytree(ROOT / "app", tmp_path / "app",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    env = {**os.environ, "PYTHONPATH": str(tmp_path), "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def revisions() -> int:
+        done = subprocess.run([sys.executable, "-c", REVISIONS], cwd=tmp_path, env=env,
+                              capture_output=True, text=True, timeout=600, check=True)
+        return int(done.stdout.split()[-1])
+
+    assert revisions() > 0
+    risk = tmp_path / "app" / "core" / "risk.py"
+    source = risk.read_text()
+    assert "return max(threshold, least + margin)" in source
+    risk.write_text(source.replace("return max(threshold, least + margin)", "return 1e300"))
+    assert revisions() == 0
+
+
+def test_a_stale_fingerprint_clears_the_cores_kernels_and_nothing_else(tmp_path: Path
+                                                                        ) -> None:
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    where = ("from app.core import compiled; "
+             "print(*compiled.cache_folders(), compiled.fingerprint())")
+
+    def start() -> list[str]:
+        return subprocess.run([sys.executable, "-c", where], cwd=ROOT, env=env,
+                              capture_output=True, text=True, timeout=120,
+                              check=True).stdout.split()
+
+    folder, fingerprint = start()
+    stamp = Path(folder) / "core-sources.sha256"
+    assert stamp.read_text() == fingerprint  # a new cache is stamped
+    core = Path(folder) / "reach.risk-1.py311.nbi"
+    other = Path(folder) / "elsewhere.f-1.py311.nbi"
+    for path in (core, other):
+        path.write_bytes(b"")
+    assert start() == [folder, fingerprint] and core.exists()  # current: kept
+    stamp.write_text("an older core")
+    start()
+    assert not core.exists() and other.exists() and stamp.read_text() == fingerprint

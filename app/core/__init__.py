@@ -4,6 +4,7 @@ This package knows nothing of HTTP, pydantic or torch: the service and the clien
 on it. Start with :class:`Shield` and :class:`ShieldConfig`.
 """
 
+from app.core import compiled
 from app.core.config import (
     ActionSpec,
     Bound,
@@ -25,6 +26,8 @@ from app.core.errors import (
     UnknownCriterion,
 )
 from app.core.shield import Candidate, Decision, Shield
+
+compiled.keep_cache_current()  # before any kernel loads from the cache (app.core.compiled)
 
 __all__ = [
     "ActionSpec",
