@@ -21,7 +21,7 @@ from pathlib import Path
 from app.core import ShieldConfig
 from bench.worlds.harness import World, compare, summary_line
 
-WORLDS = ("braking_lead", "pendulum", "wall")
+WORLDS = ("braking_lead", "pendulum", "wall", "lane")
 
 
 def world_named(name: str) -> World:
