@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import importlib
 
+import numpy as np
 import pytest
 
 from bench.worlds.__main__ import world_named
 from bench.worlds.harness import compare, run
 
-WORLDS = ["braking_lead", "pendulum", "wall"]
+WORLDS = ["braking_lead", "pendulum", "wall", "lane"]
 
 
 @pytest.mark.parametrize("name", WORLDS)
@@ -20,6 +21,25 @@ def test_a_world_fails_without_the_shield_and_runs_with_it(name: str) -> None:
     assert set(alone["failures"]) <= {c.name for c in world.config.criteria}
     shielded = run(world, seed=7, episodes=12, warmup=2, config=world.config)
     assert shielded["states"] > 0 and shielded["episodes"] == 10
+
+
+def test_the_lane_is_left_on_the_side_the_bend_pushes_towards_and_steering_turns_it() -> None:
+    from bench.worlds.lane import A_MAX, Lane
+
+    def first_event(push: float, action: float) -> str | None:
+        env = Lane()
+        env.reset(seed=5)
+        env.push, env.bend_left = push, 10_000  # one long bend
+        for _ in range(300):
+            *_, info = env.step(np.array([action]))
+            if info["event"]:
+                return str(info["event"])
+        return None
+
+    assert first_event(1.0, 0.0) == "departure_left"
+    assert first_event(-1.0, 0.0) == "departure_right"
+    assert first_event(1.0, -A_MAX) == "departure_right"  # steering beats the bend
+    assert first_event(-1.0, A_MAX) == "departure_left"
 
 
 def test_compare_is_deterministic() -> None:
