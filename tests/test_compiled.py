@@ -28,10 +28,16 @@ def test_warm_compiles_into_a_cold_cache_and_then_loads_from_it(tmp_path: Path) 
     assert "loaded from its cache" in second, second
 
 
-def test_the_image_build_warms_the_cache() -> None:
+def test_the_image_build_warms_a_cache_that_the_service_user_may_write() -> None:
+    """numba refuses a cache folder it cannot write (then, with no home to fall back on, it
+    cannot even import the core): the image warms its own folder and hands it to the user the
+    service runs as."""
     dockerfile = (Path(__file__).parents[1] / "Dockerfile").read_text()
     install = dockerfile.index('pip install --no-cache-dir ".[service]"')
-    assert install < dockerfile.index("python -m app warm") < dockerfile.index("USER shield")
+    assert "NUMBA_CACHE_DIR=/srv/numba-cache" in dockerfile[:install]
+    assert (install < dockerfile.index("python -m app warm")
+            < dockerfile.index('chown -R shield "$NUMBA_CACHE_DIR"')
+            < dockerfile.index("USER shield"))
 
 
 def test_warm_leaves_nothing_to_compile_for_the_presets() -> None:
