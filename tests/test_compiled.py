@@ -102,3 +102,19 @@ def test_a_stale_fingerprint_clears_the_cores_kernels_and_nothing_else(tmp_path:
     stamp.write_text("an older core")
     start()
     assert not core.exists() and other.exists() and stamp.read_text() == fingerprint
+
+
+def test_with_no_folder_numba_can_cache_in_the_core_loads_and_caches_in_a_temporary_one(
+        tmp_path: Path) -> None:
+    """numba asked to look only where the user points it (``NUMBA_CACHE_DIR``, unset here)
+    finds no folder, as a read-only install run by a user without a home does: the core
+    still loads, caching in the temporary folder, and says so."""
+    env = {key: value for key, value in os.environ.items() if key != "NUMBA_CACHE_DIR"}
+    env |= {"NUMBA_CACHE_LOCATOR_CLASSES": "UserProvidedCacheLocator", "TMPDIR": str(tmp_path)}
+    code = ("import numpy as np; from app.core import risk; "
+            "print(risk.kept_limit(np.array([0.25, 0.5]), 0.1, 0.5))")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=300, check=True)
+    assert done.stdout.split() == ["0.75"]
+    assert "no folder it can write" in done.stderr
+    assert any((tmp_path / f"efsm-numba-{os.getuid()}").rglob("risk.kept_limit-*.nbi"))

@@ -4,7 +4,10 @@ This package knows nothing of HTTP, pydantic or torch: the service and the clien
 on it. Start with :class:`Shield` and :class:`ShieldConfig`.
 """
 
-from app.core import compiled
+from app.core import (
+    _cache_folder,  # noqa: F401  (first: numba needs a cache folder)
+    compiled,
+)
 from app.core.config import (
     ActionSpec,
     Bound,
