@@ -118,3 +118,16 @@ def test_with_no_folder_numba_can_cache_in_the_core_loads_and_caches_in_a_tempor
     assert done.stdout.split() == ["0.75"]
     assert "no folder it can write" in done.stderr
     assert any((tmp_path / f"efsm-numba-{os.getuid()}").rglob("risk.kept_limit-*.nbi"))
+
+
+def test_the_temporary_cache_folder_is_one_only_its_user_may_write(tmp_path: Path) -> None:
+    from app.core._cache_folder import private_folder
+
+    mine = private_folder(tmp_path / "efsm-numba-x")
+    assert mine == tmp_path / "efsm-numba-x" and private_folder(mine) == mine
+    shared = tmp_path / "efsm-numba-y"
+    shared.mkdir()
+    shared.chmod(0o777)  # anyone may write it: another folder, made for us alone
+    other = private_folder(shared)
+    assert other != shared and other.parent == tmp_path
+    assert other.stat().st_mode & 0o777 == 0o700
