@@ -89,6 +89,9 @@ class LocalRisk:
         # per state and bin, the box of the observations it was applied at (empty: inf, -inf)
         self._low = np.zeros((0, n_bins, dim))
         self._high = np.zeros((0, n_bins, dim))
+        # where the observation was seen: the union of those boxes (rows low, high; empty: the
+        # low row above the high one)
+        self._extent = np.array([[np.inf] * dim, [-np.inf] * dim])
         self.midpoints = (np.arange(n_bins) + 0.5) / n_bins
         ring = horizon + 1
         self._queue_index = np.zeros((0, ring, belief_size), dtype=np.int64)
@@ -99,7 +102,7 @@ class LocalRisk:
         # the dynamics per state (dimension x [1, z, u]) and the failures seen (app.core.reach)
         self._dynamics = np.zeros((0, dim, self.size))
         self._dynamics_cov = np.zeros((0, self.size, self.size))
-        self._spread = np.zeros((0, dim))  # the mean square of each dimension's one-step error
+        self._peak = np.zeros(dim)  # the peak one-step error per dimension (app.core.reach)
         self._points = np.zeros((n_criteria, reach.MAX_POINTS, dim))
         self._point_counts = np.zeros((n_criteria, 2), dtype=np.int64)  # kept, next slot
         self._arrays: tuple[Any, ...] | None = None  # see arrays
@@ -127,8 +130,6 @@ class LocalRisk:
         self._dynamics_cov = ensure_capacity(self._dynamics_cov, n + 1, self.max_states)
         self._dynamics[n] = 0.0
         self._dynamics_cov[n] = np.eye(self.size) * PRIOR_COV
-        self._spread = ensure_capacity(self._spread, n + 1, self.max_states)
-        self._spread[n] = 0.0
         self._tried[n] = 0
         self._low = ensure_capacity(self._low, n + 1, self.max_states)
         self._high = ensure_capacity(self._high, n + 1, self.max_states)
@@ -154,9 +155,9 @@ class LocalRisk:
         ``action_bin`` applied) ended in ``failure`` (a criterion index) or not; ``ended``
         closes its episode. One compiled call."""
         self.reserve(slot)
-        learn_step(self._theta, self._cov, self._tried, self._low, self._high, self.midpoints,
-                   self._queue_index, self._queue_prob, self._queue_phi, self._queue_ends,
-                   self.failures, slot, belief.index, belief.prob, z, action_bin,
+        learn_step(self._theta, self._cov, self._tried, self._low, self._high, self._extent,
+                   self.midpoints, self._queue_index, self._queue_prob, self._queue_phi,
+                   self._queue_ends, self.failures, slot, belief.index, belief.prob, z, action_bin,
                    -1 if failure is None else failure, ended, self.horizon)
 
     def learn_motion(self, belief: Belief, before: FloatArray, action_bin: int,
@@ -166,7 +167,7 @@ class LocalRisk:
         point of criterion ``failure``, if one. What a shield's step learns in its compiled
         call, for a model built by hand."""
         phi = np.array([1.0, *before, self.midpoints[action_bin]])
-        reach.learn(self._dynamics, self._dynamics_cov, self._spread, belief.index,
+        reach.learn(self._dynamics, self._dynamics_cov, self._peak, belief.index,
                     belief.prob, phi, after)
         if failure is not None:
             reach.add_failure(self._points, self._point_counts, failure, after,
@@ -174,14 +175,14 @@ class LocalRisk:
 
     def arrays(self) -> tuple[Any, ...]:
         """What a compiled step learns and decides with (:func:`learn_step`'s arrays, in
-        order, then the reach's: the dynamics, their covariances and spreads, the failure
-        points, their counts and the bounds): the same tuple until a state is added or a new
-        slot reserved."""
+        order, then the reach's: the dynamics, their covariances, the peak one-step error,
+        the failure points, their counts and the bounds): the same tuple until a state is
+        added or a new slot reserved."""
         if self._arrays is None:
             self._arrays = (self._theta, self._cov, self._tried, self._low, self._high,
-                            self.midpoints, self._queue_index, self._queue_prob,
+                            self._extent, self.midpoints, self._queue_index, self._queue_prob,
                             self._queue_phi, self._queue_ends, self.failures,
-                            self._dynamics, self._dynamics_cov, self._spread, self._points,
+                            self._dynamics, self._dynamics_cov, self._peak, self._points,
                             self._point_counts, self.bounds)
         return self._arrays
 
@@ -221,9 +222,9 @@ class LocalRisk:
         and ``verdicts`` each bin's verdict; one compiled call."""
         return decide_step(self._theta, self._tried, self._low, self._high, belief.index,
                            belief.prob, z, self.midpoints, safe, proposed_bin, threshold,
-                           margin, by_bin, verdicts, self._dynamics, self._spread,
-                           self._points, self._point_counts, self.bounds, self.reach_horizon,
-                           self.reach_radius)
+                           margin, by_bin, verdicts, self._dynamics, self._peak,
+                           self._extent, self._points, self._point_counts, self.bounds,
+                           self.reach_horizon, self.reach_radius)
 
     def snapshot(self, slots: Mapping[str, int]) -> dict[str, Any]:
         """Exact state as arrays: the weights, their covariances, the bins' boxes, the
@@ -248,7 +249,7 @@ class LocalRisk:
                 "tried": self.tried.copy(), **self._boxes(),
                 "failures": self.failures.copy(), "dynamics": self._dynamics[: self._n].copy(),
                 "dynamics_cov": self._dynamics_cov[: self._n].copy(),
-                "spread": self._spread[: self._n].copy(),
+                "peak": self._peak.copy(),
                 "points": self._points.copy(), "point_counts": self._point_counts.copy(),
                 "streams": names,
                 "lengths": np.array(lengths, dtype=np.int64),
@@ -290,22 +291,26 @@ class LocalRisk:
                                       "dimensions only (empty boxes: in all)",
                                       field="local_risk.low")
             self._low[~empty], self._high[~empty] = low[~empty], high[~empty]
+            if (~empty).any():
+                self._extent[0] = low[~empty].min(axis=0)
+                self._extent[1] = high[~empty].max(axis=0)
         self.failures = stored.ints(data["failures"], "local_risk.failures", (n_criteria,)).copy()
         self._restore_reach(n_states, data)
         self._restore_pending(n_states, slots, data)
         return self
 
     def _restore_reach(self, n_states: int, data: dict[str, Any]) -> None:
-        """The dynamics, their spreads and the failure points (a snapshot from before them:
-        none learned)."""
+        """The dynamics, the peak one-step error and the failure points (a snapshot from
+        before them: none learned; one from before the peak, whose states kept a spread each,
+        the peak still to learn)."""
         m, shape = self.size, (n_states, self.dim, self.size)
         self._dynamics = np.zeros(shape)
         self._dynamics_cov = np.zeros((n_states, m, m))
         self._dynamics_cov[:] = np.eye(m) * PRIOR_COV
-        self._spread = np.zeros((n_states, self.dim))
-        if "spread" in data:
-            self._spread = stored.floats(data["spread"], "local_risk.spread",
-                                         self._spread.shape, low=0.0).copy()
+        self._peak = np.zeros(self.dim)
+        if "peak" in data:
+            self._peak = stored.floats(data["peak"], "local_risk.peak", (self.dim,),
+                                       low=0.0).copy()
         if "dynamics" not in data:
             return
         self._dynamics = stored.floats(data["dynamics"], "local_risk.dynamics", shape).copy()
@@ -358,7 +363,7 @@ class LocalRisk:
 
 @njit(cache=True)
 def learn_step(theta: FloatArray, cov: FloatArray, tried: IntArray, low: FloatArray,
-           high: FloatArray, midpoints: FloatArray, queue_index: IntArray,
+           high: FloatArray, extent: FloatArray, midpoints: FloatArray, queue_index: IntArray,
            queue_prob: FloatArray, queue_phi: FloatArray, queue_ends: IntArray,
            failures: IntArray, slot: int, index: IntArray, prob: FloatArray, z: FloatArray,
            action_bin: int, failure: int, ended: bool, horizon: int) -> None:
@@ -382,6 +387,8 @@ def learn_step(theta: FloatArray, cov: FloatArray, tried: IntArray, low: FloatAr
     for r in range(d):
         low[home, action_bin, r] = min(low[home, action_bin, r], z[r])
         high[home, action_bin, r] = max(high[home, action_bin, r], z[r])
+        extent[0, r] = min(extent[0, r], z[r])
+        extent[1, r] = max(extent[1, r], z[r])
         phi[r + 1] = z[r]
     phi[d + 1] = midpoints[action_bin]
     length += 1
@@ -456,9 +463,9 @@ def decide_step(theta: FloatArray, tried: IntArray, low: FloatArray, high: Float
                 index: IntArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
                 safe: IntArray, proposed_bin: int, threshold: float, margin: float,
                 by_bin: FloatArray, verdicts: IntArray, dynamics: FloatArray,
-                spread: FloatArray, points: FloatArray, point_counts: IntArray,
-                bounds: FloatArray, reach_horizon: int, reach_radius: float
-                ) -> tuple[float, int, int, bool]:
+                peak: FloatArray, extent: FloatArray, points: FloatArray,
+                point_counts: IntArray, bounds: FloatArray, reach_horizon: int,
+                reach_radius: float) -> tuple[float, int, int, bool]:
     """:meth:`LocalRisk.decide` on its arrays: :func:`_read` and the reach
     (:func:`app.core.reach.risk`), each under the monotone prior, and the decision on both
     (:func:`app.core.risk.decide_with_reach`)."""
@@ -466,8 +473,8 @@ def decide_step(theta: FloatArray, tried: IntArray, low: FloatArray, high: Float
     risk.monotone(by_bin, safe)
     reached = np.zeros(by_bin.shape)
     if reach_horizon > 0:
-        reach.risk(dynamics, spread, index, prob, z, midpoints, safe, points, point_counts,
-                   bounds, reach_horizon, reach_radius, reached)
+        reach.risk(dynamics, peak, extent, index, prob, z, midpoints, safe, points,
+                   point_counts, bounds, reach_horizon, reach_radius, reached)
         risk.monotone(reached, safe)
     return risk.decide_with_reach(by_bin, reached, proposed_bin, threshold, margin, safe,
                                   verdicts)

@@ -19,14 +19,18 @@ dynamics carry no confound of the controller's choices.
 reported (a new one within half the radius of a kept one adds nothing).
 
 **Bounds.** A criterion may declare where its failures lie (a :class:`~app.core.config.Bound`:
-one observation at or below a value, or at or above one). Each state keeps the running mean
-square of each dimension's one-step error (its *spread*); a one-step disturbance of up to
-:data:`KAPPA` root mean squares a dimension, carried through the blended dynamics
-(``sum_s |e_b A^s| w`` after s steps, ``A = I + W_z``), is the path's worst case on the bound's
-dimension. An action fails the bound at the first step where that worst case crosses it, and
-its risk is the earlier the higher, ``1 - t / horizon``: the action that puts a crossing off the
-longest is the safest, also where no action avoids it (where the closeness to points saturates
-and cannot tell the actions apart).
+one observation at or below a value, or at or above one). The path's worst case is a box, one
+interval a dimension, carried through the blended dynamics by interval arithmetic: each step
+widens every dimension but the bound's own by its *peak*, the largest one-step error of
+learned dynamics seen on it (a state's dynamics count once its intercept's variance is below
+:data:`SETTLED`; the peak fades at :data:`PEAK_DECAY` a step), and keeps it within where the
+observation was seen (the *extent*). So the worst case is what the world was seen to do, such
+as a lead braking at its hardest, and no more: a speed never seen below zero does not go below
+it, and the box stops growing where the world stops. The bound's own dimension (a distance, a
+rate) is carried by the others, not disturbed: its one-step errors are the model's misfit, not
+the world's doing. An action fails the bound when the box reaches it, and its risk is the
+earlier the higher, ``1 - tau / (horizon + 1)`` with ``tau`` the crossing's time in steps,
+interpolated within its step, so that actions stay apart where no action avoids the bound.
 
 **Reach.** For an action bin a and criterion c the belief's models are blended into one at the
 current observation and rolled out for ``horizon`` steps: the first step under a, every later
@@ -51,8 +55,8 @@ IntArray = npt.NDArray[np.int64]
 
 MAX_POINTS = 64  # failure observations kept per criterion
 MIN_WEIGHT = 1e-3  # belief weights below this do not update a state's dynamics
-SPREAD_RATE = 0.02  # rate of each state's running mean square one-step error
-KAPPA = 2.0  # a step's disturbance bound, in root mean square one-step errors
+SETTLED = 0.01  # a state's dynamics count as learned once its intercept's variance is below
+PEAK_DECAY = 1e-4  # the rate at which the peak one-step error fades, a learned step
 
 
 def no_bounds(n_criteria: int) -> FloatArray:
@@ -65,25 +69,24 @@ def no_bounds(n_criteria: int) -> FloatArray:
 
 
 @njit(cache=True)
-def learn(dynamics: FloatArray, cov: FloatArray, spread: FloatArray, index: IntArray,
+def learn(dynamics: FloatArray, cov: FloatArray, peak: FloatArray, index: IntArray,
           prob: FloatArray, phi: FloatArray, z: FloatArray) -> None:
     """One transition into the dynamics of the states of the belief it left from (``index``,
-    ``prob``; ``phi = [1, z_before, u]``, ``z`` after): each state's spread moves towards the
-    square of its model's error on it (by the state's weight), then weighted recursive least
-    squares on the change ``z - z_before``, every dimension sharing the state's covariance."""
+    ``prob``; ``phi = [1, z_before, u]``, ``z`` after): the peak one-step error per dimension
+    (``peak``) takes the error of the most likely state's dynamics when they are learned
+    (:data:`SETTLED`), then weighted recursive least squares on the change
+    ``z - z_before``, every dimension sharing the state's covariance."""
     d = z.shape[0]
     change = np.empty(d)
     for k in range(d):
         change[k] = z[k] - phi[k + 1]
-    for t in range(index.shape[0]):
-        i, weight = index[t], prob[t]
-        if weight < MIN_WEIGHT:
-            continue
+    home = index[np.argmax(prob)]
+    if cov[home, 0, 0] < SETTLED:
         for k in range(d):
             error = change[k]
             for r in range(phi.shape[0]):
-                error -= dynamics[i, k, r] * phi[r]
-            spread[i, k] += SPREAD_RATE * weight * (error * error - spread[i, k])
+                error -= dynamics[home, k, r] * phi[r]
+            peak[k] = max(abs(error), peak[k] * (1.0 - PEAK_DECAY))
     weighted_rls(dynamics, cov, index, prob, phi, change, MIN_WEIGHT)
 
 
@@ -136,34 +139,35 @@ def _closest(points: FloatArray, kept: int, c: int, p: FloatArray, v: FloatArray
 
 
 @njit(cache=True)
-def risk(dynamics: FloatArray, spread: FloatArray, index: IntArray, prob: FloatArray,
-         z: FloatArray, midpoints: FloatArray, safe: IntArray, points: FloatArray,
-         counts: IntArray, bounds: FloatArray, horizon: int, radius: float,
-         out: FloatArray) -> None:
+def risk(dynamics: FloatArray, peak: FloatArray, extent: FloatArray, index: IntArray,
+         prob: FloatArray, z: FloatArray, midpoints: FloatArray, safe: IntArray,
+         points: FloatArray, counts: IntArray, bounds: FloatArray, horizon: int,
+         radius: float, out: FloatArray) -> None:
     """``out`` (bins x criteria): each action's reach risk at ``z`` under the belief
     (``index``, ``prob``), see the module docstring: the larger of its closeness to the
     failure points and, for a criterion with a bound (``bounds``, :func:`no_bounds`), how
-    early its worst case crosses the bound; 0 for a criterion with neither. Each step of the
-    path is checked against the failure points only where the segment of all bins' points
-    comes within the failures' box widened by the radius."""
+    early the box of its worst cases reaches the bound (:func:`crossing`); 0 for a criterion
+    with neither. Each step of the path is checked against the failure points only where the
+    segment of all bins' points comes within the failures' box widened by the radius."""
     d, q = z.shape[0], midpoints.shape[0]
     model = np.zeros((d, d + 2))  # the belief's blend of its states' dynamics
-    disturbance = np.zeros(d)  # and of their spreads, as a bound on one step's error
     for t in range(index.shape[0]):
         for k in range(d):
-            disturbance[k] += prob[t] * spread[index[t], k]
             for r in range(d + 2):
                 model[k, r] += prob[t] * dynamics[index[t], k, r]
-    for k in range(d):
-        disturbance[k] = KAPPA * math.sqrt(disturbance[k])
     p, v, step = np.empty(d), np.empty(d), np.empty(d)
     low, high, nearest = np.empty(d), np.empty(d), np.empty(q)
-    sensitivity, turned = np.empty(d), np.empty(d)
     u_low, u_high = midpoints[0], midpoints[q - 1]
     for c in range(safe.shape[0]):
         kept, b = counts[c, 0], int(bounds[c, 0])
         out[:, c] = 0.0
-        if kept == 0 and b < 0:
+        u_safe = midpoints[0 if safe[c] < 0 else q - 1]
+        if b >= 0:
+            for a in range(q):
+                when = crossing(model, peak, extent, z, midpoints[a], u_safe, b, bounds[c, 1],
+                                bounds[c, 2], horizon)
+                out[a, c] = 1.0 - when / (horizon + 1)
+        if kept == 0:
             continue
         low[:] = math.inf
         high[:] = -math.inf
@@ -177,27 +181,8 @@ def risk(dynamics: FloatArray, spread: FloatArray, index: IntArray, prob: FloatA
             for r in range(d):
                 p[k] += model[k, r + 1] * z[r]
             v[k] = model[k, d + 1]
-        u_safe = midpoints[0 if safe[c] < 0 else q - 1]
-        # the worst case on the bound's dimension: |e_b A^s| . disturbance, summed over s
-        sensitivity[:] = 0.0
-        if b >= 0:
-            sensitivity[b] = 1.0
-        worst = 0.0
-        for t in range(horizon):
-            if b >= 0:
-                for r in range(d):
-                    worst += abs(sensitivity[r]) * disturbance[r]
-                for r in range(d):
-                    turned[r] = sensitivity[r]
-                    for k in range(d):
-                        turned[r] += sensitivity[k] * model[k, r + 1]
-                sensitivity[:] = turned
-                crossing = 1.0 - t / horizon
-                for a in range(q):
-                    x = p[b] + v[b] * midpoints[a]
-                    if x - worst <= bounds[c, 1] or x + worst >= bounds[c, 2]:
-                        out[a, c] = max(out[a, c], crossing)
-            inside = kept > 0
+        for _ in range(horizon):
+            inside = True
             for r in range(d):
                 first, last = p[r] + v[r] * u_low, p[r] + v[r] * u_high
                 if max(first, last) < low[r] or min(first, last) > high[r]:
@@ -222,3 +207,49 @@ def risk(dynamics: FloatArray, spread: FloatArray, index: IntArray, prob: FloatA
                     step[k] += model[k, r + 1] * v[r]
             for k in range(d):
                 v[k] += step[k]
+
+
+@njit(cache=True)
+def crossing(model: FloatArray, peak: FloatArray, extent: FloatArray, z: FloatArray,
+             u_first: float, u_safe: float, b: int, below: float, above: float,
+             horizon: int) -> float:
+    """When the box of the worst cases reaches ``below`` or ``above`` on dimension ``b``, in
+    steps from ``z`` (interpolated within the step; 0 when ``z`` is there already,
+    ``horizon + 1`` when the box does not get there in ``horizon`` steps). The box starts at
+    ``z`` and takes one step under ``u_first``, the rest under ``u_safe``, of ``model``
+    (``x + W [1, x, u]``, interval arithmetic); each step widens every dimension but ``b`` by
+    its ``peak`` and keeps it within ``extent`` (rows: lowest, highest seen; an empty one,
+    low above high, keeps nothing), stretched to hold ``z``."""
+    d = z.shape[0]
+    lo, hi, next_lo, next_hi = z.copy(), z.copy(), np.empty(d), np.empty(d)
+    if z[b] <= below or z[b] >= above:
+        return 0.0
+    u = u_first
+    for t in range(horizon):
+        for k in range(d):
+            base = model[k, 0] + model[k, d + 1] * u
+            widen = 0.0 if k == b else peak[k]
+            next_lo[k], next_hi[k] = base - widen, base + widen
+            for r in range(d):
+                gain = model[k, r + 1] + (1.0 if r == k else 0.0)  # of A = I + W_z
+                if gain >= 0.0:
+                    next_lo[k] += gain * lo[r]
+                    next_hi[k] += gain * hi[r]
+                else:
+                    next_lo[k] += gain * hi[r]
+                    next_hi[k] += gain * lo[r]
+        when = math.inf
+        if next_lo[b] <= below:
+            when = t + (lo[b] - below) / (lo[b] - next_lo[b])
+        if next_hi[b] >= above:
+            when = min(when, t + (above - hi[b]) / (next_hi[b] - hi[b]))
+        if when < math.inf:
+            return when
+        for k in range(d):
+            lo[k], hi[k] = next_lo[k], next_hi[k]
+            if k != b and extent[0, k] <= extent[1, k]:
+                floor, ceiling = min(extent[0, k], z[k]), max(extent[1, k], z[k])
+                lo[k] = min(max(lo[k], floor), ceiling)
+                hi[k] = min(max(hi[k], floor), ceiling)
+        u = u_safe
+    return horizon + 1.0

@@ -13,7 +13,8 @@ estimates, per action, the probability of each failure within a horizon
 * **The decision.** The proposal is kept when its total risk is under an absolute threshold or
   within a margin of the safest action's; otherwise the allowed action nearest to it is applied.
   With the reach (:mod:`app.core.reach`) two tables are asked: an action must be allowed by the
-  reach, and also by the local model where the two allow an action in common.
+  reach, and also by the local model where the two allow an action in common. Where no action
+  avoids a failure on its worst path, the allowed action furthest to the safe side applies.
 """
 
 from __future__ import annotations
@@ -120,9 +121,14 @@ def decide_with_reach(by_bin: FloatArray, reached: FloatArray, proposed_bin: int
     ``verdicts`` gets each bin's: -1 allowed, else the riskiest criterion of the table that
     refused it (the reach's first); ``by_bin`` becomes the larger of the two, what the
     decision record shows. Returns the limit of the table that refused the proposal (the
-    local one's when it was kept), the proposal's verdict, the bin to apply (:func:`choose`
-    among the allowed bins, towards the safe side of the proposal's riskiest criterion) and
-    whether that is the proposal."""
+    local one's when it was kept), the proposal's verdict, the bin to apply and whether that
+    is the proposal. The bin applied is the proposal when allowed, else the nearest allowed
+    bin (:func:`choose`, towards the safe side of the proposal's riskiest criterion); but
+    when no bin's reach is within the threshold (a failure that no action avoids on its worst
+    path), the allowed bin furthest to the safe side of the criterion the proposal's reach
+    risks most, the proposal only when it is that bin: braking as hard as allowed rather
+    than as little as the reach's margin allows, which its crossing times, all close to each
+    other there, cannot tell apart."""
     q, n_c = by_bin.shape
     local, far = np.empty(q), np.empty(q)
     for a in range(q):
@@ -150,6 +156,18 @@ def decide_with_reach(by_bin: FloatArray, reached: FloatArray, proposed_bin: int
             by_bin[a, c] = max(by_bin[a, c], reached[a, c])
     limit = limit_far if far[proposed_bin] > limit_far else limit_local
     worst = verdicts[proposed_bin]
+    if far.min() > threshold:
+        # no bin keeps clear of a failure on its worst path: the allowed bin furthest to the
+        # safe side of the criterion the proposal risks most puts the failure off the longest
+        riskiest = 0
+        for c in range(1, n_c):
+            if reached[proposed_bin, c] > reached[proposed_bin, riskiest]:
+                riskiest = c
+        for a in range(q - 1, -1, -1) if safe[riskiest] > 0 else range(q):
+            if refused[a] == 0.0:
+                if a == proposed_bin:
+                    return limit, worst, a, True
+                return limit, riskiest if worst < 0 else worst, a, False
     if worst < 0:
         return limit, worst, proposed_bin, True
     return limit, worst, choose(refused, proposed_bin, 0.0, safe[worst]), False

@@ -46,10 +46,11 @@ def learn_and_decide(
     lr: float, log_decay: FloatArray, numbers: FloatArray, row_counts: IntArray,
     pool_cols: ColArray, pool_vals: FloatArray, used: IntArray, slots: IntArray,
     horizon: int, theta: FloatArray, cov: FloatArray, tried: IntArray, low: FloatArray,
-    high: FloatArray, midpoints: FloatArray, queue_index: IntArray, queue_prob: FloatArray,
-    queue_phi: FloatArray, queue_ends: IntArray, failures: IntArray, dynamics: FloatArray,
-    dynamics_cov: FloatArray, spread: FloatArray, points: FloatArray, point_counts: IntArray,
-    bounds: FloatArray, flag_table: IntArray, flag_failures: IntArray, rate: bool, min_rate: float,
+    high: FloatArray, extent: FloatArray, midpoints: FloatArray, queue_index: IntArray,
+    queue_prob: FloatArray, queue_phi: FloatArray, queue_ends: IntArray, failures: IntArray,
+    dynamics: FloatArray, dynamics_cov: FloatArray, peak: FloatArray, points: FloatArray,
+    point_counts: IntArray, bounds: FloatArray, flag_table: IntArray, flag_failures: IntArray,
+    rate: bool, min_rate: float,
     safe: IntArray, threshold: float, margin: float, reach_horizon: int, reach_radius: float,
     prev_index: IntArray, prev_prob: FloatArray, prev_z: FloatArray, index: IntArray,
     prob: FloatArray, z: FloatArray, recognised: int, entered: bool, event: int, done: bool,
@@ -79,13 +80,13 @@ def learn_and_decide(
         if needed:
             return needed, False, False, 0.0, 0, 0, False
     if risk_bin >= 0:
-        local_risk.learn_step(theta, cov, tried, low, high, midpoints, queue_index, queue_prob,
-                              queue_phi, queue_ends, failures, slot, prev_index, prev_prob,
-                              prev_z, risk_bin, event, done, horizon)
+        local_risk.learn_step(theta, cov, tried, low, high, extent, midpoints, queue_index,
+                              queue_prob, queue_phi, queue_ends, failures, slot, prev_index,
+                              prev_prob, prev_z, risk_bin, event, done, horizon)
         if reach_horizon > 0:
             phi = np.empty(prev_z.shape[0] + 2)
             phi[0], phi[1:-1], phi[-1] = 1.0, prev_z, midpoints[risk_bin]
-            reach.learn(dynamics, dynamics_cov, spread, prev_index, prev_prob, phi, z)
+            reach.learn(dynamics, dynamics_cov, peak, prev_index, prev_prob, phi, z)
     if event >= 0 and reach_horizon > 0:
         reach.add_failure(points, point_counts, event, z, reach_radius)
     changed = flags.observe(flag_table, flag_failures, recognised, event, entered, rate,
@@ -94,6 +95,6 @@ def learn_and_decide(
         return 0, changed, False, 0.0, 0, 0, False
     limit, worst, final, kept = local_risk.decide_step(
         theta, tried, low, high, index, prob, z, midpoints, safe, proposed_bin, threshold,
-        margin, by_bin, verdicts, dynamics, spread, points, point_counts, bounds, reach_horizon,
-        reach_radius)
+        margin, by_bin, verdicts, dynamics, peak, extent, points, point_counts, bounds,
+        reach_horizon, reach_radius)
     return 0, changed, True, limit, worst, final, kept

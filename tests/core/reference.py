@@ -8,8 +8,6 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-from app.core.reach import KAPPA
-
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
@@ -91,18 +89,16 @@ def cluster(state: dict[str, FloatArray], z: FloatArray, epsilon: float, rho: fl
 
 def reach(dynamics: FloatArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
           safe_bin: int, points: FloatArray, horizon: int, radius: float,
-          spread: FloatArray | None = None,
+          peak: FloatArray | None = None, extent: FloatArray | None = None,
           bound: tuple[int, float, float] | None = None) -> FloatArray:
     """Each bin's reach risk for one criterion (app.core.reach): the belief's blend of the
     states' dynamics, one step under the bin, then ``horizon - 1`` under ``safe_bin``, each
     point's closeness ``max(0, 1 - distance / radius)`` to the nearest failure point; with a
-    ``bound`` (dimension, below, above) and the states' ``spread``, ``1 - t / horizon`` at
-    the first step t where the path, widened by the disturbance carried by the matrix powers
-    of ``A = I + W_z``, crosses it."""
-    d = z.shape[0]
+    ``bound`` (dimension, below, above), ``1 - tau / (horizon + 1)`` where the box of worst
+    cases (intervals through ``A = I + W_z``, every dimension but the bound's widened by
+    ``peak`` and kept within ``extent`` stretched to hold z) first reaches it, ``tau``
+    interpolated within the step."""
     model = np.einsum("i,ikr->kr", prob, dynamics)
-    a_matrix = np.eye(d) + model[:, 1:d + 1]
-    disturbance = KAPPA * np.sqrt(prob @ spread) if spread is not None else np.zeros(d)
     out = np.zeros(midpoints.shape[0])
     for a, u in enumerate(midpoints):
         x = z.copy()
@@ -111,10 +107,37 @@ def reach(dynamics: FloatArray, prob: FloatArray, z: FloatArray, midpoints: Floa
             if points.shape[0]:
                 distance = np.sqrt(((points - x) ** 2).sum(axis=1)).min()
                 out[a] = max(out[a], 1.0 - distance / radius)
-            if bound is not None:
-                b, below, above = bound
-                worst = sum(np.abs(np.linalg.matrix_power(a_matrix, s)[b]) @ disturbance
-                            for s in range(t + 1))
-                if x[b] - worst <= below or x[b] + worst >= above:
-                    out[a] = max(out[a], 1.0 - t / horizon)
+        if bound is not None:
+            assert peak is not None and extent is not None
+            tau = _crossing(model, peak, extent, z, u, midpoints[safe_bin], bound, horizon)
+            out[a] = max(out[a], 1.0 - tau / (horizon + 1))
     return out
+
+
+def _crossing(model: FloatArray, peak: FloatArray, extent: FloatArray, z: FloatArray,
+              u: float, u_safe: float, bound: tuple[int, float, float], horizon: int) -> float:
+    b, below, above = bound
+    d = z.shape[0]
+    gains = np.eye(d) + model[:, 1:d + 1]
+    up, down = np.maximum(gains, 0.0), np.minimum(gains, 0.0)
+    widen = peak.copy()
+    widen[b] = 0.0
+    keep = (np.arange(d) != b) & (extent[0] <= extent[1])  # (an empty extent keeps nothing)
+    floor, ceiling = np.minimum(extent[0], z), np.maximum(extent[1], z)
+    lo, hi = z.copy(), z.copy()
+    if z[b] <= below or z[b] >= above:
+        return 0.0
+    for t in range(horizon):
+        base = model[:, 0] + model[:, d + 1] * (u if t == 0 else u_safe)
+        new_lo = base - widen + up @ lo + down @ hi
+        new_hi = base + widen + up @ hi + down @ lo
+        times = [np.inf]
+        if new_lo[b] <= below:
+            times.append(t + (lo[b] - below) / (lo[b] - new_lo[b]))
+        if new_hi[b] >= above:
+            times.append(t + (above - hi[b]) / (new_hi[b] - hi[b]))
+        if min(times) < np.inf:
+            return float(min(times))
+        lo = np.where(keep, np.clip(new_lo, floor, ceiling), new_lo)
+        hi = np.where(keep, np.clip(new_hi, floor, ceiling), new_hi)
+    return horizon + 1.0

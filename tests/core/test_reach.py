@@ -18,7 +18,7 @@ SAFE = np.array([-1, 1], dtype=np.int64)  # collision-like, then falling-behind-
 def test_the_dynamics_are_weighted_ridge_least_squares_on_the_changes() -> None:
     rng = np.random.default_rng(0)
     dynamics, cov = np.zeros((2, 2, 4)), np.stack([np.eye(4) * PRIOR_COV] * 2)
-    spread = np.zeros((2, 2))
+    peak = np.zeros(2)
     truth = rng.normal(0, 0.3, (2, 4))
     rows, changes, weights = [], [], []
     for _ in range(100):
@@ -26,7 +26,7 @@ def test_the_dynamics_are_weighted_ridge_least_squares_on_the_changes() -> None:
         phi = np.array([1.0, *before, u])
         after = before + truth @ phi + rng.normal(0, 0.01, 2)
         # the second state's weight is below the floor: it learns nothing
-        reach.learn(dynamics, cov, spread, np.array([0, 1]), np.array([weight, 1e-4]), phi,
+        reach.learn(dynamics, cov, peak, np.array([0, 1]), np.array([weight, 1e-4]), phi,
                     after)
         rows.append(phi)
         changes.append(after - before)
@@ -37,59 +37,93 @@ def test_the_dynamics_are_weighted_ridge_least_squares_on_the_changes() -> None:
     assert np.allclose(dynamics[0], expected, atol=1e-9)
     assert np.allclose(dynamics[0], truth, atol=0.02)
     assert not dynamics[1].any() and np.array_equal(cov[1], np.eye(4) * PRIOR_COV)
-    assert not spread[1].any()
 
 
-def test_the_spread_is_the_running_mean_square_of_the_one_step_error() -> None:
+def test_the_peak_is_the_largest_error_of_learned_dynamics_and_fades() -> None:
     rng = np.random.default_rng(1)
     dynamics, cov = np.zeros((1, 1, 3)), np.eye(3)[None] * PRIOR_COV
-    spread = np.zeros((1, 1))
-    for _ in range(3000):
+    peak = np.zeros(1)
+
+    def learn(noise: float) -> None:
         before, u = rng.uniform(0, 1, 1), rng.uniform(0, 1)
-        after = before + 0.1 - 0.2 * u + rng.normal(0, 0.05, 1)
-        reach.learn(dynamics, cov, spread, np.array([0]), np.array([1.0]),
+        after = before + 0.1 - 0.2 * u + noise
+        reach.learn(dynamics, cov, peak, np.array([0]), np.array([1.0]),
                     np.array([1.0, *before, u]), after)
-    assert spread[0, 0] == pytest.approx(0.05 ** 2, rel=0.3)  # the noise's variance
+
+    learn(5.0)  # a first error, before the dynamics are learned: it does not count
+    assert peak[0] == 0.0 and cov[0, 0, 0] >= reach.SETTLED
+    for _ in range(3000):
+        learn(rng.uniform(-0.05, 0.05))
+    assert cov[0, 0, 0] < reach.SETTLED
+    assert 0.045 < peak[0] < 0.06  # the noise's largest, and the fit's small error
+    learn(0.5)
+    assert peak[0] == pytest.approx(0.5, abs=0.02)
+    for _ in range(1000):
+        learn(0.0)
+    assert peak[0] == pytest.approx(0.5 * (1 - reach.PEAK_DECAY) ** 1000, rel=0.05)
 
 
 def test_a_path_towards_a_failure_is_risky_and_one_away_from_it_is_not() -> None:
     # one dimension: z' - z = -0.2 + 0.4 u, so the slow bin (u 0.25) moves down by 0.1 a
     # step and the fast one (u 0.75) up by 0.1; a failure seen at 0.15
-    dynamics, spread = np.array([[[-0.2, 0.0, 0.4]]]), np.zeros((1, 1))
+    dynamics, peak, extent = np.array([[[-0.2, 0.0, 0.4]]]), np.zeros(1), np.array([[0.0], [1.0]])
     points = np.zeros((1, reach.MAX_POINTS, 1))
     points[0, 0, 0] = 0.15
     counts = np.array([[1, 1]])
     out = np.empty((2, 1))
     for safe, expected in ((np.array([-1]), [0.5, 0.0]),  # safe: slow (down from 0.6)
                            (np.array([1]), [0.0, 0.0])):  # safe: fast, back up after one
-        reach.risk(dynamics, spread, np.array([0]), np.array([1.0]), np.array([0.5]),
+        reach.risk(dynamics, peak, extent, np.array([0]), np.array([1.0]), np.array([0.5]),
                    np.array([0.25, 0.75]), safe, points, counts, reach.no_bounds(1), 3, 0.1,
                    out)
         # slow first, then 3 steps: 0.4, 0.3, 0.2 (0.05 from the failure: half the radius)
         assert out[:, 0] == pytest.approx(expected)
-    reach.risk(dynamics, spread, np.array([0]), np.array([1.0]), np.array([0.5]),
+    reach.risk(dynamics, peak, extent, np.array([0]), np.array([1.0]), np.array([0.5]),
                np.array([0.25, 0.75]), np.array([-1]), points, np.array([[0, 0]]),
                reach.no_bounds(1), 3, 0.1, out)
     assert not out.any()  # no failure seen and no bound: no risk
 
 
-@pytest.mark.parametrize(("error", "expected"), [(0.15, [1 / 6, 5 / 6]), (0.0, [0.0, 0.0])])
-def test_a_bound_fails_an_action_at_its_worst_cases_first_crossing(
-        error: float, expected: list[float]) -> None:
-    # z' - z = -0.2 + 0.4 u: the slow bin (u 0.25, the safe one) moves down by 0.1 a step,
-    # the fast one up by 0.1; failures at or above 0.8, no failure point seen. A step's
-    # disturbance of ``error`` (KAPPA root mean squares) adds up: (t + 1) * error after t.
-    # Fast first: 0.6, then 0.5 + 0.3 = 0.8 at t = 1; slow: 0.4 - 0.1 t + 0.15 (t + 1)
-    # reaches 0.8 at t = 5; horizon 6. Without a disturbance neither path gets there.
-    dynamics = np.array([[[-0.2, 0.0, 0.4]]])
-    spread = np.array([[(error / reach.KAPPA) ** 2]])
+# Two dimensions: a gap h (bounded: failures at or below 0) and the speed v at which it
+# closes, h' = h - v and v' = v - 0.1 + 0.2 u: the slow bin (u 0.25, the safe one) takes 0.05
+# off the speed a step, the fast one (u 0.75) adds 0.05. From h 0.3, v 0.1, horizon 5.
+CLOSING = np.array([[[0.0, 0.0, -1.0, 0.0], [-0.1, 0.0, 0.0, 0.2]]])
+
+
+@pytest.mark.parametrize(("peak", "expected"), [
+    # no disturbance: slow, h 0.2, 0.15, 0.15 (v stays at the 0 seen, not below): never, 0;
+    # fast: h 0.2, 0.05, then -0.05 halfway through the third step, tau 2.5
+    (0.0, [0.0, 1 - 2.5 / 6]),
+    # the speed may rise by 0.05 more a step: slow, v within [0, 0.1], so the gap's low end
+    # goes 0.2, 0.1, 0.0: tau 3; fast, v within [0.1, 0.2]: 0.2, then 0.0, tau 2
+    (0.05, [0.5, 1 - 2 / 6]),
+])
+def test_a_bound_fails_an_action_when_the_box_of_its_worst_cases_reaches_it(
+        peak: float, expected: list[float]) -> None:
     bounds = reach.no_bounds(1)
-    bounds[0, 0], bounds[0, 2] = 0, 0.8
+    bounds[0, 0], bounds[0, 1] = 0, 0.0
     out = np.empty((2, 1))
-    reach.risk(dynamics, spread, np.array([0]), np.array([1.0]), np.array([0.5]),
-               np.array([0.25, 0.75]), np.array([-1]), np.zeros((1, reach.MAX_POINTS, 1)),
-               np.array([[0, 0]]), bounds, 6, 0.1, out)
+    reach.risk(CLOSING, np.array([0.0, peak]), np.array([[0.0, 0.0], [1.0, 1.0]]),
+               np.array([0]), np.array([1.0]), np.array([0.3, 0.1]), np.array([0.25, 0.75]),
+               np.array([-1]), np.zeros((1, reach.MAX_POINTS, 2)), np.array([[0, 0]]), bounds,
+               5, 0.1, out)
     assert out[:, 0] == pytest.approx(expected)
+
+
+def test_the_box_stays_where_the_observation_was_seen() -> None:
+    # h' = h + v, v' = v - 0.1 + 0.2 u, from h 0.3, v 0, the slow bin first and after, a
+    # peak of 0.05 on v: kept at or above the 0 seen, v stays 0 and h 0.3; where nothing was
+    # seen (an empty extent) v's low end goes -0.1, -0.2 and h's 0.3, 0.2, 0.0: tau 3
+    opening = CLOSING.copy()
+    opening[0, 0, 2] = 1.0
+    bounds = reach.no_bounds(1)
+    bounds[0, 0], bounds[0, 1] = 0, 0.0
+    model, peak, z = opening[0], np.array([0.0, 0.05]), np.array([0.3, 0.0])
+    seen, unseen = np.array([[0.0, 0.0], [1.0, 1.0]]), np.array([[np.inf] * 2, [-np.inf] * 2])
+    assert reach.crossing(model, peak, seen, z, 0.25, 0.25, 0, 0.0, np.inf, 5) == 6.0
+    assert reach.crossing(model, peak, unseen, z, 0.25, 0.25, 0, 0.0, np.inf, 5) == 3.0
+    assert reach.crossing(model, peak, seen, np.array([0.0, 0.0]), 0.25, 0.25, 0, 0.0,
+                          np.inf, 5) == 0.0  # at the bound already
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -97,7 +131,9 @@ def test_the_reach_kernel_gives_the_reference_rollouts(seed: int) -> None:
     rng = np.random.default_rng(seed)
     d, q, n, horizon, radius = 3, 7, 4, 12, 0.3
     dynamics = rng.normal(0, 0.1, (n, d, d + 2))
-    spread = rng.uniform(0, 0.01, (n, d))
+    peak = rng.uniform(0, 0.05, d)
+    extent = np.sort(rng.uniform(-0.5, 1.5, (2, d)), axis=0)
+    extent[:, int(rng.integers(d))] = np.inf, -np.inf  # nothing seen on one dimension
     index, prob = np.array([0, 2, 3]), rng.dirichlet(np.ones(3))
     z, midpoints = rng.uniform(0, 1, d), (np.arange(q) + 0.5) / q
     points = np.zeros((2, reach.MAX_POINTS, d))
@@ -106,11 +142,11 @@ def test_the_reach_kernel_gives_the_reference_rollouts(seed: int) -> None:
     bounds, b = reach.no_bounds(2), int(rng.integers(d))
     bounds[0, 0], bounds[0, 1] = b, 0.1
     out = np.empty((q, 2))
-    reach.risk(dynamics, spread, index, prob, z, midpoints, SAFE, points,
+    reach.risk(dynamics, peak, extent, index, prob, z, midpoints, SAFE, points,
                np.array([[5, 5], [5, 5]]), bounds, horizon, radius, out)
     for c, safe_bin in enumerate((0, q - 1)):
         expected = reference.reach(dynamics[index], prob, z, midpoints, safe_bin,
-                                   points[c, :5], horizon, radius, spread[index],
+                                   points[c, :5], horizon, radius, peak, extent,
                                    (b, 0.1, np.inf) if c == 0 else None)
         assert out[:, c] == pytest.approx(expected, abs=1e-12)
 
@@ -167,6 +203,22 @@ def test_where_both_allow_bins_the_local_model_narrows_the_reachs_choice() -> No
     assert (final, kept) == (0, False) and verdicts.tolist() == [-1, 0, 0, 0, 0]
 
 
+@pytest.mark.parametrize(("proposed", "expected"), [(1, (0, False, 0)), (4, (0, False, 0)),
+                                                   (0, (0, True, -1))])
+def test_where_no_bin_avoids_the_failure_the_safest_allowed_bin_applies(
+        proposed: int, expected: tuple[int, bool, int]) -> None:
+    # every path crosses the bound; bins 0 and 1 within the margin of the latest crossing:
+    # the one furthest to the safe side applies, even where the proposal (1) is allowed
+    q = 5
+    by_bin, reached = np.zeros((q, 2)), np.zeros((q, 2))
+    reached[:, 0] = [0.5, 0.5005, 0.52, 0.6, 0.7]
+    verdicts = np.empty(q, dtype=np.int64)
+    _, worst, final, kept = risk.decide_with_reach(by_bin, reached, proposed, 0.0, 0.001, SAFE,
+                                                   verdicts)
+    assert (final, kept, worst) == expected
+    assert verdicts.tolist() == [-1, -1, 0, 0, 0]
+
+
 def test_a_shield_learns_dynamics_and_failure_points_and_snapshots_them() -> None:
     shield = Shield(ShieldConfig())
     crash_world(shield, 20, seed=1)
@@ -194,15 +246,42 @@ def test_bounds_lie_in_the_clustering_space() -> None:
     assert shield.local_risk.bounds.tolist() == [[1.0, z[0], z[1]]]
 
 
-def test_a_snapshot_with_a_negative_spread_is_refused() -> None:
+def test_a_snapshot_with_a_negative_peak_is_refused() -> None:
     shield = Shield(ShieldConfig())
     crash_world(shield, 20, seed=1)
     data = shield.snapshot()
-    assert data["local_risk"]["spread"].any()
-    data["local_risk"]["spread"][0, 0] = -1.0
+    data["local_risk"]["peak"][0] = -1.0
     with pytest.raises(InvalidSnapshot) as error:
         Shield.from_snapshot(data)
-    assert error.value.field == "local_risk.spread"
+    assert error.value.field == "local_risk.peak"
+
+
+def test_the_peak_round_trips_and_a_snapshot_from_before_it_loads_with_it_to_learn() -> None:
+    shield = Shield(ShieldConfig())
+    crash_world(shield, 20, seed=1)
+    data = shield.snapshot()
+    data["local_risk"]["peak"] = np.array([0.01, 0.02, 0.03])
+    restored = Shield.from_snapshot(data)
+    assert restored.snapshot()["local_risk"]["peak"].tolist() == [0.01, 0.02, 0.03]
+    n = data["local_risk"]["dynamics"].shape[0]
+    del data["local_risk"]["peak"]
+    data["local_risk"]["spread"] = np.zeros((n, 3))  # what it kept instead, per state
+    restored = Shield.from_snapshot(data)
+    assert not restored.snapshot()["local_risk"]["peak"].any()
+
+
+def test_the_extent_is_the_union_of_the_boxes_and_survives_a_snapshot() -> None:
+    shield = Shield(ShieldConfig())
+    crash_world(shield, 20, seed=1)
+    assert shield.local_risk is not None
+    extent = shield.local_risk.arrays()[5]
+    low, high = shield.snapshot()["local_risk"]["low"], shield.snapshot()["local_risk"]["high"]
+    applied = low <= high
+    assert np.array_equal(extent[0], np.where(applied, low, np.inf).min(axis=(0, 1)))
+    assert np.array_equal(extent[1], np.where(applied, high, -np.inf).max(axis=(0, 1)))
+    restored = Shield.from_snapshot(shield.snapshot())
+    assert restored.local_risk is not None
+    assert np.array_equal(restored.local_risk.arrays()[5], extent)
 
 
 def test_a_snapshot_with_a_bad_failure_point_count_is_refused() -> None:
