@@ -146,7 +146,7 @@ def risk(dynamics: FloatArray, peak: FloatArray, extent: FloatArray, index: IntA
     """``out`` (bins x criteria): each action's reach risk at ``z`` under the belief
     (``index``, ``prob``), see the module docstring: the larger of its closeness to the
     failure points and, for a criterion with a bound (``bounds``, :func:`no_bounds`), how
-    early the box of its worst cases reaches the bound (:func:`crossing`); 0 for a criterion
+    early the box of its worst cases reaches the bound (:func:`crossings`); 0 for a criterion
     with neither. Each step of the path is checked against the failure points only where the
     segment of all bins' points comes within the failures' box widened by the radius."""
     d, q = z.shape[0], midpoints.shape[0]
@@ -156,17 +156,17 @@ def risk(dynamics: FloatArray, peak: FloatArray, extent: FloatArray, index: IntA
             for r in range(d + 2):
                 model[k, r] += prob[t] * dynamics[index[t], k, r]
     p, v, step = np.empty(d), np.empty(d), np.empty(d)
-    low, high, nearest = np.empty(d), np.empty(d), np.empty(q)
+    low, high, nearest, when = np.empty(d), np.empty(d), np.empty(q), np.empty(q)
     u_low, u_high = midpoints[0], midpoints[q - 1]
     for c in range(safe.shape[0]):
         kept, b = counts[c, 0], int(bounds[c, 0])
         out[:, c] = 0.0
         u_safe = midpoints[0 if safe[c] < 0 else q - 1]
         if b >= 0:
+            crossings(model, peak, extent, z, midpoints, u_safe, b, bounds[c, 1], bounds[c, 2],
+                      horizon, when)
             for a in range(q):
-                when = crossing(model, peak, extent, z, midpoints[a], u_safe, b, bounds[c, 1],
-                                bounds[c, 2], horizon)
-                out[a, c] = 1.0 - when / (horizon + 1)
+                out[a, c] = 1.0 - when[a] / (horizon + 1)
         if kept == 0:
             continue
         low[:] = math.inf
@@ -210,46 +210,62 @@ def risk(dynamics: FloatArray, peak: FloatArray, extent: FloatArray, index: IntA
 
 
 @njit(cache=True)
-def crossing(model: FloatArray, peak: FloatArray, extent: FloatArray, z: FloatArray,
-             u_first: float, u_safe: float, b: int, below: float, above: float,
-             horizon: int) -> float:
-    """When the box of the worst cases reaches ``below`` or ``above`` on dimension ``b``, in
-    steps from ``z`` (interpolated within the step; 0 when ``z`` is there already,
-    ``horizon + 1`` when the box does not get there in ``horizon`` steps). The box starts at
-    ``z`` and takes one step under ``u_first``, the rest under ``u_safe``, of ``model``
-    (``x + W [1, x, u]``, interval arithmetic); each step widens every dimension but ``b`` by
-    its ``peak`` and keeps it within ``extent`` (rows: lowest, highest seen; an empty one,
-    low above high, keeps nothing), stretched to hold ``z``."""
-    d = z.shape[0]
-    lo, hi, next_lo, next_hi = z.copy(), z.copy(), np.empty(d), np.empty(d)
+def crossings(model: FloatArray, peak: FloatArray, extent: FloatArray, z: FloatArray,
+              midpoints: FloatArray, u_safe: float, b: int, below: float, above: float,
+              horizon: int, when: FloatArray) -> None:
+    """``when[a]``: when the box of the worst cases of bin a reaches ``below`` or ``above``
+    on dimension ``b``, in steps from ``z`` (interpolated within the step; 0 when ``z`` is
+    there already, ``horizon + 1`` when the box does not get there in ``horizon`` steps). Each
+    bin's box starts at ``z`` and takes one step under its midpoint, the rest under
+    ``u_safe``, of ``model`` (``x + W [1, x, u]``, interval arithmetic); each step widens every
+    dimension but ``b`` by its ``peak`` and keeps it within ``extent`` (rows: lowest, highest
+    seen; an empty one, low above high, keeps nothing), stretched to hold ``z``. The bins'
+    boxes go side by side (dimension x bin), so that each step is a few loops over the bins."""
+    d, q = z.shape[0], midpoints.shape[0]
     if z[b] <= below or z[b] >= above:
-        return 0.0
-    u = u_first
+        when[:] = 0.0
+        return
+    when[:] = horizon + 1.0
+    lo, hi = np.empty((d, q)), np.empty((d, q))
+    next_lo, next_hi = np.empty((d, q)), np.empty((d, q))
+    for k in range(d):
+        lo[k, :] = z[k]
+        hi[k, :] = z[k]
+    left = q  # the bins whose box has not reached the bound
     for t in range(horizon):
         for k in range(d):
-            base = model[k, 0] + model[k, d + 1] * u
             widen = 0.0 if k == b else peak[k]
-            next_lo[k], next_hi[k] = base - widen, base + widen
+            for a in range(q):
+                base = model[k, 0] + model[k, d + 1] * (midpoints[a] if t == 0 else u_safe)
+                next_lo[k, a], next_hi[k, a] = base - widen, base + widen
             for r in range(d):
                 gain = model[k, r + 1] + (1.0 if r == k else 0.0)  # of A = I + W_z
                 if gain >= 0.0:
-                    next_lo[k] += gain * lo[r]
-                    next_hi[k] += gain * hi[r]
+                    for a in range(q):
+                        next_lo[k, a] += gain * lo[r, a]
+                        next_hi[k, a] += gain * hi[r, a]
                 else:
-                    next_lo[k] += gain * hi[r]
-                    next_hi[k] += gain * lo[r]
-        when = math.inf
-        if next_lo[b] <= below:
-            when = t + (lo[b] - below) / (lo[b] - next_lo[b])
-        if next_hi[b] >= above:
-            when = min(when, t + (above - hi[b]) / (next_hi[b] - hi[b]))
-        if when < math.inf:
-            return when
+                    for a in range(q):
+                        next_lo[k, a] += gain * hi[r, a]
+                        next_hi[k, a] += gain * lo[r, a]
+        for a in range(q):
+            if when[a] <= horizon:
+                continue  # reached before
+            first = math.inf
+            if next_lo[b, a] <= below:
+                first = t + (lo[b, a] - below) / (lo[b, a] - next_lo[b, a])
+            if next_hi[b, a] >= above:
+                first = min(first, t + (above - hi[b, a]) / (next_hi[b, a] - hi[b, a]))
+            if first < math.inf:
+                when[a] = first
+                left -= 1
+        if left == 0:
+            return
         for k in range(d):
-            lo[k], hi[k] = next_lo[k], next_hi[k]
-            if k != b and extent[0, k] <= extent[1, k]:
-                floor, ceiling = min(extent[0, k], z[k]), max(extent[1, k], z[k])
-                lo[k] = min(max(lo[k], floor), ceiling)
-                hi[k] = min(max(hi[k], floor), ceiling)
-        u = u_safe
-    return horizon + 1.0
+            kept = k != b and extent[0, k] <= extent[1, k]
+            floor, ceiling = min(extent[0, k], z[k]), max(extent[1, k], z[k])
+            for a in range(q):
+                lo[k, a], hi[k, a] = next_lo[k, a], next_hi[k, a]
+                if kept:
+                    lo[k, a] = min(max(lo[k, a], floor), ceiling)
+                    hi[k, a] = min(max(hi[k, a], floor), ceiling)

@@ -120,10 +120,16 @@ def test_the_box_stays_where_the_observation_was_seen() -> None:
     bounds[0, 0], bounds[0, 1] = 0, 0.0
     model, peak, z = opening[0], np.array([0.0, 0.05]), np.array([0.3, 0.0])
     seen, unseen = np.array([[0.0, 0.0], [1.0, 1.0]]), np.array([[np.inf] * 2, [-np.inf] * 2])
-    assert reach.crossing(model, peak, seen, z, 0.25, 0.25, 0, 0.0, np.inf, 5) == 6.0
-    assert reach.crossing(model, peak, unseen, z, 0.25, 0.25, 0, 0.0, np.inf, 5) == 3.0
-    assert reach.crossing(model, peak, seen, np.array([0.0, 0.0]), 0.25, 0.25, 0, 0.0,
-                          np.inf, 5) == 0.0  # at the bound already
+
+    def when(extent: np.ndarray, start: np.ndarray) -> float:
+        out = np.empty(1)
+        reach.crossings(model, peak, extent, start, np.array([0.25]), 0.25, 0, 0.0, np.inf, 5,
+                        out)
+        return float(out[0])
+
+    assert when(seen, z) == 6.0
+    assert when(unseen, z) == 3.0
+    assert when(seen, np.array([0.0, 0.0])) == 0.0  # at the bound already
 
 
 @pytest.mark.parametrize("seed", range(5))
