@@ -1,0 +1,83 @@
+"""What the risk reviser's kernels cost inside a step, where a loop over them alone misleads.
+
+A kernel timed alone in a loop runs on warm caches; inside a step it follows the clustering,
+the learning and Python's own work, and costs more. This runs :mod:`bench.step_cost`'s model
+and keep workload and, on every step that decides, times the reach
+(:func:`app.core.reach.risk`) and the local model's read (:func:`app.core.local_risk._read`)
+again on that step's own arrays, right after the step's compiled call. Reported: the medians
+over the steps, beside the compiled call's own. Compare commits by running it in a worktree
+of each, in the same session.
+
+    python bench/reach_cost.py --states 10 1000
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import app.core.shield as shield_module  # noqa: E402
+from app.core import local_risk, reach  # noqa: E402
+from bench.step_cost import SEED, build, steps, time_steps  # noqa: E402
+
+
+def measure(n: int, count: int) -> dict[str, float]:
+    """Median microseconds of the step's compiled call, the reach and the read at n states."""
+    shield = build(n)
+    time_steps(shield, steps(200, SEED + 99, "keep"))  # compiled and warm
+    compiled_call = shield_module.learn_and_decide
+    code = compiled_call.py_func.__code__
+    names = code.co_varnames[:code.co_argcount]
+    times: dict[str, list[float]] = {"step's compiled call": [], "reach": [], "read": []}
+
+    def timed(*args: Any) -> Any:
+        start = time.perf_counter()
+        result = compiled_call(*args)
+        times["step's compiled call"].append(time.perf_counter() - start)
+        a = dict(zip(names, args, strict=True))
+        if a["decide"] and result[2]:
+            out = np.empty_like(a["by_bin"])
+            start = time.perf_counter()
+            reach.risk(a["dynamics"], a["peak"], a["extent"], a["index"], a["prob"], a["z"],
+                       a["midpoints"], a["safe"], a["points"], a["point_counts"], a["bounds"],
+                       a["reach_horizon"], a["reach_radius"], out)
+            times["reach"].append(time.perf_counter() - start)
+            start = time.perf_counter()
+            local_risk._read(a["theta"], a["tried"], a["low"], a["high"], a["index"],
+                             a["prob"], a["z"], a["midpoints"], a["safe"], out)
+            times["read"].append(time.perf_counter() - start)
+        return result
+
+    shield_module.learn_and_decide = timed
+    try:
+        time_steps(shield, steps(count, SEED, "keep"))
+    finally:
+        shield_module.learn_and_decide = compiled_call
+    return {name: statistics.median(values) * 1e6 for name, values in times.items()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--states", type=int, nargs="+", default=[10, 1000])
+    parser.add_argument("--steps", type=int, default=3000)
+    args = parser.parse_args()
+    print(f"seed {SEED}, keep workload, {args.steps} steps, medians; {platform.machine()}, "
+          f"Python {platform.python_version()}\n")
+    print("| states | the step's compiled call (us) | the reach (us) | the read (us) |")
+    print("|---:|---:|---:|---:|")
+    for n in args.states:
+        row = measure(n, args.steps)
+        print(f"| {n} | " + " | ".join(f"{value:.1f}" for value in row.values()) + " |")
+
+
+if __name__ == "__main__":
+    main()
