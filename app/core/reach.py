@@ -228,9 +228,15 @@ def crossings(model: FloatArray, peak: FloatArray, extent: FloatArray, z: FloatA
     when[:] = horizon + 1.0
     lo, hi = np.empty((d, q)), np.empty((d, q))
     next_lo, next_hi = np.empty((d, q)), np.empty((d, q))
+    gain = np.empty((d, d))  # A = I + W_z
+    floor, ceiling, kept = np.empty(d), np.empty(d), np.empty(d, dtype=np.bool_)
     for k in range(d):
         lo[k, :] = z[k]
         hi[k, :] = z[k]
+        for r in range(d):
+            gain[k, r] = model[k, r + 1] + (1.0 if r == k else 0.0)
+        kept[k] = k != b and extent[0, k] <= extent[1, k]
+        floor[k], ceiling[k] = min(extent[0, k], z[k]), max(extent[1, k], z[k])
     left = q  # the bins whose box has not reached the bound
     for t in range(horizon):
         for k in range(d):
@@ -239,15 +245,15 @@ def crossings(model: FloatArray, peak: FloatArray, extent: FloatArray, z: FloatA
                 base = model[k, 0] + model[k, d + 1] * (midpoints[a] if t == 0 else u_safe)
                 next_lo[k, a], next_hi[k, a] = base - widen, base + widen
             for r in range(d):
-                gain = model[k, r + 1] + (1.0 if r == k else 0.0)  # of A = I + W_z
-                if gain >= 0.0:
+                g = gain[k, r]
+                if g >= 0.0:
                     for a in range(q):
-                        next_lo[k, a] += gain * lo[r, a]
-                        next_hi[k, a] += gain * hi[r, a]
+                        next_lo[k, a] += g * lo[r, a]
+                        next_hi[k, a] += g * hi[r, a]
                 else:
                     for a in range(q):
-                        next_lo[k, a] += gain * hi[r, a]
-                        next_hi[k, a] += gain * lo[r, a]
+                        next_lo[k, a] += g * hi[r, a]
+                        next_hi[k, a] += g * lo[r, a]
         for a in range(q):
             if when[a] <= horizon:
                 continue  # reached before
@@ -262,10 +268,8 @@ def crossings(model: FloatArray, peak: FloatArray, extent: FloatArray, z: FloatA
         if left == 0:
             return
         for k in range(d):
-            kept = k != b and extent[0, k] <= extent[1, k]
-            floor, ceiling = min(extent[0, k], z[k]), max(extent[1, k], z[k])
             for a in range(q):
                 lo[k, a], hi[k, a] = next_lo[k, a], next_hi[k, a]
-                if kept:
-                    lo[k, a] = min(max(lo[k, a], floor), ceiling)
-                    hi[k, a] = min(max(hi[k, a], floor), ceiling)
+                if kept[k]:
+                    lo[k, a] = min(max(lo[k, a], floor[k]), ceiling[k])
+                    hi[k, a] = min(max(hi[k, a], floor[k]), ceiling[k])
