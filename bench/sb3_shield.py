@@ -27,7 +27,7 @@ from stable_baselines3.common.noise import NormalActionNoise
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.core import ReviserConfig, ShieldConfig
+from app.core import ReviserConfig, ShieldConfig, compiled
 from client.shield import ShieldWrapper  # noqa: E402
 from client.shield.sb3 import AppliedActionReplayBuffer, Failures  # noqa: E402
 
@@ -84,6 +84,7 @@ def main() -> None:
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"machine": platform.processor() or platform.machine(),
+                                        "core": compiled.fingerprint()[:12],
                                         "steps": args.steps, "rows": rows, "ratio": ratio},
                                        indent=1))
 

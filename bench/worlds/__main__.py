@@ -18,7 +18,7 @@ import json
 import platform
 from pathlib import Path
 
-from app.core import ShieldConfig
+from app.core import ShieldConfig, compiled
 from bench.worlds.harness import World, compare, summary_line
 
 WORLDS = ("braking_lead", "pendulum", "wall", "lane")
@@ -74,7 +74,9 @@ def main() -> None:
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"overrides": overrides, "machine": platform.processor()
-                                        or platform.machine(), "results": results}, indent=1))
+                                        or platform.machine(),
+                                        "core": compiled.fingerprint()[:12],
+                                        "results": results}, indent=1))
 
 
 if __name__ == "__main__":

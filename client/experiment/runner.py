@@ -24,7 +24,7 @@ from typing import IO, Any, Literal, Protocol, TypeVar
 import numpy as np
 
 import app
-from app.core import Shield, ShieldConfig
+from app.core import Shield, ShieldConfig, compiled
 from app.service import codec
 from client.agents.idm import PRESETS, RandomController
 from client.experiment import records
@@ -101,11 +101,14 @@ def run_seeds(seed: int, runs: int) -> list[int]:
 
 def versions() -> dict[str, str]:
     """The libraries and the processor a run computed with: floating point can come out
-    differently on another processor or build, and then a run does not replay."""
+    differently on another processor or build, and then a run does not replay. ``core``
+    names the e-FSM's sources in this process (the first 12 digits of their fingerprint),
+    which tell two methods apart where their configurations read the same."""
     import gymnasium
     import torch
 
-    return {"shield": app.__version__, "python": platform.python_version(),
+    return {"shield": app.__version__, "core": compiled.fingerprint()[:12],
+            "python": platform.python_version(),
             "numpy": np.__version__, "torch": torch.__version__,
             "gymnasium": gymnasium.__version__,
             "cpu": f"{processor()} ({torch.backends.cpu.get_cpu_capability()})"}
@@ -129,7 +132,9 @@ def replay_mismatch(path: Path, episode: int) -> str:
     here = versions()
     changed = [f"{name} {written.get(name, 'not recorded')} there, {value} here"
                for name, value in here.items() if written.get(name) != value]
-    if changed:
+    if changed and written.get("core") not in (None, here["core"]):
+        cause = f"written with {'; '.join(changed)}: the e-FSM has changed since"
+    elif changed:
         cause = f"written with {'; '.join(changed)}: arithmetic differs between machines and builds"
     else:
         cause = "written with these libraries on this processor: the code has changed since"

@@ -326,8 +326,8 @@ def test_a_stopped_run_goes_on_by_replaying(tmp_path: Path) -> None:
 
 def test_a_run_that_does_not_replay_says_what_differs(tmp_path: Path) -> None:
     """Floating point can come out differently on another processor or build, so records
-    written elsewhere may not replay here: the refusal names what differs, and blames the
-    code only when the libraries and the processor are the same."""
+    written elsewhere may not replay here: the refusal names what differs (the e-FSM's
+    sources among it), and blames the code only when all of that is the same."""
     arm = "idm-aggressive"
     runner.run_one(CONFIG, arm, 0, tmp_path)
     path = records.path_for(tmp_path, arm, 0)
@@ -341,6 +341,10 @@ def test_a_run_that_does_not_replay_says_what_differs(tmp_path: Path) -> None:
     write({**runner.versions(), "cpu": "Another CPU (AVX512)"})
     with pytest.raises(records.RecordError, match=r"episode 2 did not replay identically "
                        r"\(written with cpu Another CPU \(AVX512\) there, .+ here: arithmetic"):
+        runner.run_one(CONFIG, arm, 0, tmp_path)
+    write({**runner.versions(), "core": "0" * 12})  # another e-FSM, the same libraries
+    with pytest.raises(records.RecordError, match=r"\(written with core 000000000000 there, "
+                       r"[0-9a-f]{12} here: the e-FSM has changed since"):
         runner.run_one(CONFIG, arm, 0, tmp_path)
     write(runner.versions())
     with pytest.raises(records.RecordError, match="the code has changed since"):
