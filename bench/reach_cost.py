@@ -5,8 +5,10 @@ the learning and Python's own work, and costs more. This runs :mod:`bench.step_c
 and keep workload and, on every step that decides, times the reach
 (:func:`app.core.reach.risk`) and the local model's read (:func:`app.core.local_risk._read`)
 again on that step's own arrays, right after the step's compiled call. Reported: the medians
-over the steps, beside the compiled call's own. Compare commits by running it in a worktree
-of each, in the same session.
+over the steps of the whole step (timed on a copy of the model without the timers), of its
+two compiled calls (the clustering and recognition; the learning and the decision) and of
+the reach and the read within the second. Compare commits by running it in a worktree of
+each, in the same session.
 
     python bench/reach_cost.py --states 10 1000
 """
@@ -29,20 +31,37 @@ import app.core.shield as shield_module  # noqa: E402
 from app.core import local_risk, reach  # noqa: E402
 from bench.step_cost import SEED, build, steps, time_steps  # noqa: E402
 
+COLUMNS = ("the whole step", "clustering and recognition", "learning and the decision",
+           "the reach", "the read")
+
 
 def measure(n: int, count: int) -> dict[str, float]:
-    """Median microseconds of the step's compiled call, the reach and the read at n states."""
+    """Median microseconds of the whole step, its two compiled calls, and the reach and the
+    read within the second, at n states."""
+    times: dict[str, list[float]] = {name: [] for name in COLUMNS}
+    bare = build(n)
+    time_steps(bare, steps(200, SEED + 99, "keep"))  # compiled and warm
+    for z, a in steps(count, SEED, "keep"):
+        start = time.perf_counter()
+        bare.step(z, a)
+        times["the whole step"].append(time.perf_counter() - start)
+
     shield = build(n)
-    time_steps(shield, steps(200, SEED + 99, "keep"))  # compiled and warm
-    compiled_call = shield_module.learn_and_decide
+    time_steps(shield, steps(200, SEED + 99, "keep"))
+    first_call, compiled_call = shield_module.observe, shield_module.learn_and_decide
     code = compiled_call.py_func.__code__
     names = code.co_varnames[:code.co_argcount]
-    times: dict[str, list[float]] = {"step's compiled call": [], "reach": [], "read": []}
+
+    def timed_first(*args: Any) -> Any:
+        start = time.perf_counter()
+        result = first_call(*args)
+        times["clustering and recognition"].append(time.perf_counter() - start)
+        return result
 
     def timed(*args: Any) -> Any:
         start = time.perf_counter()
         result = compiled_call(*args)
-        times["step's compiled call"].append(time.perf_counter() - start)
+        times["learning and the decision"].append(time.perf_counter() - start)
         a = dict(zip(names, args, strict=True))
         if a["decide"] and result[2]:
             out = np.empty_like(a["by_bin"])
@@ -50,18 +69,18 @@ def measure(n: int, count: int) -> dict[str, float]:
             reach.risk(a["dynamics"], a["peak"], a["extent"], a["index"], a["prob"], a["z"],
                        a["midpoints"], a["safe"], a["points"], a["point_counts"], a["bounds"],
                        a["reach_horizon"], a["reach_radius"], out)
-            times["reach"].append(time.perf_counter() - start)
+            times["the reach"].append(time.perf_counter() - start)
             start = time.perf_counter()
             local_risk._read(a["theta"], a["tried"], a["low"], a["high"], a["index"],
                              a["prob"], a["z"], a["midpoints"], a["safe"], out)
-            times["read"].append(time.perf_counter() - start)
+            times["the read"].append(time.perf_counter() - start)
         return result
 
-    shield_module.learn_and_decide = timed
+    shield_module.observe, shield_module.learn_and_decide = timed_first, timed
     try:
         time_steps(shield, steps(count, SEED, "keep"))
     finally:
-        shield_module.learn_and_decide = compiled_call
+        shield_module.observe, shield_module.learn_and_decide = first_call, compiled_call
     return {name: statistics.median(values) * 1e6 for name, values in times.items()}
 
 
@@ -72,8 +91,8 @@ def main() -> None:
     args = parser.parse_args()
     print(f"seed {SEED}, keep workload, {args.steps} steps, medians; {platform.machine()}, "
           f"Python {platform.python_version()}\n")
-    print("| states | the step's compiled call (us) | the reach (us) | the read (us) |")
-    print("|---:|---:|---:|---:|")
+    print("| states | " + " | ".join(f"{name} (us)" for name in COLUMNS) + " |")
+    print("|---:|" + "---:|" * len(COLUMNS))
     for n in args.states:
         row = measure(n, args.steps)
         print(f"| {n} | " + " | ".join(f"{value:.1f}" for value in row.values()) + " |")
