@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+import app
+from app.core import compiled
 from app.main import create_app
 from app.service import codec
 from app.settings import Settings
@@ -230,7 +232,9 @@ def strict_client() -> Iterator[TestClient]:
 
 def test_token_is_required_everywhere_but_health(strict_client: TestClient) -> None:
     c = strict_client
-    assert c.get("/healthz").status_code == 200 and c.get("/readyz").status_code == 200
+    assert c.get("/healthz").json() == {"status": "ok", "version": app.__version__,
+                                        "core": compiled.fingerprint()[:12]}
+    assert c.get("/readyz").status_code == 200
     for method, path in [("post", "/revise"), ("post", "/models/default/revise"),
                          ("get", "/models"), ("get", "/model"), ("get", "/metrics"),
                          ("post", "/models/default/reset"), ("batch", "/revise/batch"),

@@ -6,15 +6,18 @@ from fastapi import APIRouter, Depends, Request, Response
 from fastapi.responses import JSONResponse
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 
+import app
 from app.api.deps import RegistryDep, require_token
 
 router = APIRouter(tags=["operations"])
 
 
 @router.get("/healthz")
-def healthz() -> dict[str, str]:
-    """The process is alive (no token needed)."""
-    return {"status": "ok"}
+def healthz(request: Request) -> dict[str, str]:
+    """The process is alive (no token needed), with the version it serves and its e-FSM's
+    sources (``core``: the first 12 digits of their fingerprint, as experiment records name
+    them)."""
+    return {"status": "ok", "version": app.__version__, "core": request.app.state.core}
 
 
 @router.get("/readyz")
