@@ -103,7 +103,8 @@ def versions() -> dict[str, str]:
     """The libraries and the processor a run computed with: floating point can come out
     differently on another processor or build, and then a run does not replay. ``core``
     names the e-FSM's sources in this process (the first 12 digits of their fingerprint),
-    which tell two methods apart where their configurations read the same."""
+    which tell two methods apart where their configurations read the same: the shield's own
+    when it runs in-process (a service names its own at ``GET /healthz``)."""
     import gymnasium
     import torch
 
