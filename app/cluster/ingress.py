@@ -38,7 +38,7 @@ from app.cluster import asgi
 from app.cluster.placement import Moves, hashed_owner
 from app.cluster.routing import named
 from app.cluster.shard import Moved, ShardCall, ShardStream
-from app.core import ShieldError
+from app.core import ShieldError, compiled
 from app.service.registry import DEFAULT_MODEL
 from app.settings import Settings
 
@@ -176,10 +176,13 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
     api.state.settings = settings
     errors.install(api)
 
+    core = compiled.fingerprint()[:12]
+
     @api.get("/healthz")
     async def healthz() -> dict[str, str]:
-        """The ingress is alive (no token needed)."""
-        return {"status": "ok"}
+        """The ingress is alive (no token needed), with the version and the e-FSM's sources
+        of the package it and its shards run (as the plain service's)."""
+        return {"status": "ok", "version": app.__version__, "core": core}
 
     @api.get("/readyz")
     async def readyz() -> JSONResponse:
