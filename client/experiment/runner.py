@@ -127,13 +127,16 @@ def processor() -> str:
 
 
 def replay_mismatch(path: Path, episode: int) -> str:
-    """Why a recorded episode came out differently: the libraries or the processor that
-    wrote the records, where they differ from this machine's, else a change of the code."""
+    """Why a recorded episode came out differently: the e-FSM's sources, the libraries or
+    the processor that wrote the records, where they differ from this machine's, else a
+    change of the code."""
     written = records.read(path)[0].get("versions") or {}
     here = versions()
+    if "core" not in written:  # written before the headers named the e-FSM's sources
+        del here["core"]
     changed = [f"{name} {written.get(name, 'not recorded')} there, {value} here"
                for name, value in here.items() if written.get(name) != value]
-    if changed and written.get("core") not in (None, here["core"]):
+    if "core" in here and written["core"] != here["core"]:
         cause = f"written with {'; '.join(changed)}: the e-FSM has changed since"
     elif changed:
         cause = f"written with {'; '.join(changed)}: arithmetic differs between machines and builds"

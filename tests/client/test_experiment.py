@@ -346,9 +346,11 @@ def test_a_run_that_does_not_replay_says_what_differs(tmp_path: Path) -> None:
     with pytest.raises(records.RecordError, match=r"\(written with core 000000000000 there, "
                        r"[0-9a-f]{12} here: the e-FSM has changed since"):
         runner.run_one(CONFIG, arm, 0, tmp_path)
-    write(runner.versions())
-    with pytest.raises(records.RecordError, match="the code has changed since"):
-        runner.run_one(CONFIG, arm, 0, tmp_path)
+    for written in (runner.versions(), {name: value for name, value in runner.versions().items()
+                                        if name != "core"}):  # (before headers named it)
+        write(written)
+        with pytest.raises(records.RecordError, match="the code has changed since"):
+            runner.run_one(CONFIG, arm, 0, tmp_path)
     assert len(records.read(path)[1]) == 3  # refused, nothing appended
 
 
