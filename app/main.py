@@ -14,7 +14,7 @@ from app.api import errors
 from app.api.metrics import AppMetrics
 from app.api.middleware import BodyLimit, Metrics
 from app.api.routes import models, ops, revise, stream, watch
-from app.core import ShieldConfig, compiled
+from app.core import ShieldConfig
 from app.service.registry import ModelRegistry
 from app.settings import Settings, get_settings
 
@@ -55,7 +55,6 @@ def create_app(settings: Settings | None = None, *, create_default: bool = True)
     )
     api.state.settings = settings
     api.state.registry = registry
-    api.state.core = compiled.fingerprint()[:12]
     api.state.metrics = AppMetrics(registry)
     errors.install(api)
     for router in (revise.router, models.router, stream.router, ops.router, watch.router):

@@ -84,7 +84,7 @@ def main() -> None:
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"machine": platform.processor() or platform.machine(),
-                                        "core": compiled.fingerprint()[:12],
+                                        "core": compiled.version(),
                                         "steps": args.steps, "rows": rows, "ratio": ratio},
                                        indent=1))
 

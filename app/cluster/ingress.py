@@ -176,13 +176,11 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
     api.state.settings = settings
     errors.install(api)
 
-    core = compiled.fingerprint()[:12]
-
     @api.get("/healthz")
     async def healthz() -> dict[str, str]:
-        """The ingress is alive (no token needed), with the version and the e-FSM's sources
-        of the package it and its shards run (as the plain service's)."""
-        return {"status": "ok", "version": app.__version__, "core": core}
+        """The ingress is alive (no token needed), with the version and the e-FSM of the
+        package it and its shards run (as the plain service's)."""
+        return {"status": "ok", "version": app.__version__, "core": compiled.version()}
 
     @api.get("/readyz")
     async def readyz() -> JSONResponse:

@@ -80,6 +80,15 @@ def fingerprint() -> str:
     return digest.hexdigest()
 
 
+IMPORTED = fingerprint()  # the sources as this process imported them: the core it runs
+
+
+def version() -> str:
+    """The core this process runs, named by the first 12 digits of its sources' fingerprint
+    (experiment records, bench results and ``GET /healthz`` carry it)."""
+    return IMPORTED[:12]
+
+
 def cache_folders() -> set[Path]:
     """The folders where numba keeps the core's kernels (one, unless the modules moved)."""
     # (numba has no public name for it: its cache's folder, as its locator chose it)
@@ -91,7 +100,7 @@ def keep_cache_current() -> list[Path]:
     """Delete the core's cached kernels wherever the cache's fingerprint is not the sources'
     (:func:`fingerprint`), then stamp it; returns the folders cleared. A folder that cannot
     be written is left as it is, with a warning: its kernels may be older than the sources."""
-    current = fingerprint()
+    current = IMPORTED
     stems = tuple(f"{module.__name__.rpartition('.')[2]}." for module in MODULES)
     cleared = []
     for folder in sorted(cache_folders()):

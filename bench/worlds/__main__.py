@@ -75,7 +75,7 @@ def main() -> None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"overrides": overrides, "machine": platform.processor()
                                         or platform.machine(),
-                                        "core": compiled.fingerprint()[:12],
+                                        "core": compiled.version(),
                                         "results": results}, indent=1))
 
 

@@ -102,13 +102,13 @@ def run_seeds(seed: int, runs: int) -> list[int]:
 def versions() -> dict[str, str]:
     """The libraries and the processor a run computed with: floating point can come out
     differently on another processor or build, and then a run does not replay. ``core``
-    names the e-FSM's sources in this process (the first 12 digits of their fingerprint),
-    which tell two methods apart where their configurations read the same: the shield's own
-    when it runs in-process (a service names its own at ``GET /healthz``)."""
+    names the e-FSM this process runs (:func:`app.core.compiled.version`), which tells two
+    methods apart where their configurations read the same: the shield's own when it runs
+    in-process (a service names its own at ``GET /healthz``)."""
     import gymnasium
     import torch
 
-    return {"shield": app.__version__, "core": compiled.fingerprint()[:12],
+    return {"shield": app.__version__, "core": compiled.version(),
             "python": platform.python_version(),
             "numpy": np.__version__, "torch": torch.__version__,
             "gymnasium": gymnasium.__version__,

@@ -8,16 +8,16 @@ from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 
 import app
 from app.api.deps import RegistryDep, require_token
+from app.core import compiled
 
 router = APIRouter(tags=["operations"])
 
 
 @router.get("/healthz")
-def healthz(request: Request) -> dict[str, str]:
+def healthz() -> dict[str, str]:
     """The process is alive (no token needed), with the version it serves and its e-FSM's
-    sources (``core``: the first 12 digits of their fingerprint, as experiment records name
-    them)."""
-    return {"status": "ok", "version": app.__version__, "core": request.app.state.core}
+    (``core``: :func:`app.core.compiled.version`, as experiment records name it)."""
+    return {"status": "ok", "version": app.__version__, "core": compiled.version()}
 
 
 @router.get("/readyz")
