@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import json
 from functools import lru_cache
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, FilePath, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from app.core import ShieldConfig, ShieldError
 
 
 class Settings(BaseSettings):
@@ -33,7 +36,7 @@ class Settings(BaseSettings):
     token: str | None = Field(
         None, description="Bearer token every route but /healthz and /readyz requires."
     )
-    config: Path | None = Field(
+    config: FilePath | None = Field(
         None, description="JSON file with the configuration of the 'default' model."
     )
     max_body_bytes: int = Field(8 * 2**20, ge=1024, description="Largest request body (413).")
@@ -51,6 +54,23 @@ class Settings(BaseSettings):
     snapshot_every: int = Field(
         50_000, ge=1, description="Steps of a model between two snapshots of it."
     )
+    header_timeout: float = Field(
+        10.0, gt=0, le=3600,
+        description="Seconds a request's line and headers may take to arrive, from the "
+        "connection's opening or the request's first byte (then 408 and the connection closes).",
+    )
+    body_timeout: float = Field(
+        20.0, gt=0, le=3600,
+        description="Longest pause, in seconds, between two reads of a request's body (408).",
+    )
+    keep_alive_timeout: int = Field(
+        5, ge=1, le=3600, description="Seconds an idle kept-alive connection stays open."
+    )
+    max_connections: int = Field(
+        1000, ge=1,
+        description="Most connections open at once, HTTP and WebSocket; one more is answered "
+        "503 and closed. Keep it under the process's open-file limit (ulimit -n).",
+    )
     log_level: Literal["debug", "info", "warning", "error"] = "info"
 
     @field_validator("token")
@@ -58,6 +78,24 @@ class Settings(BaseSettings):
     def _token_not_blank(cls, value: str | None) -> str | None:
         if value is not None and not value.strip():
             raise ValueError("a token that is set must not be empty")
+        return value
+
+    @field_validator("config")
+    @classmethod
+    def _config_is_a_shield_configuration(cls, value: Path | None) -> Path | None:
+        """Refuse a file that is not a shield configuration when the settings are read, not
+        when the service starts, so that the error names the setting."""
+        if value is None:
+            return value
+        try:
+            ShieldConfig.from_dict(json.loads(value.read_text()))
+        except OSError as error:
+            raise ValueError(f"{value}: {error.strerror}") from error
+        except ShieldError as error:
+            field = f"{error.field}: " if error.field else ""
+            raise ValueError(f"{value}: {field}{error.message}") from error
+        except ValueError as error:  # not JSON
+            raise ValueError(f"{value}: not JSON: {error}") from error
         return value
 
 
