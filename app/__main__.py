@@ -16,6 +16,7 @@ from pydantic import ValidationError
 from pydantic_core import ErrorDetails
 from pydantic_settings import SettingsError
 
+from app.api.connections import ConnectionLimits, protocols
 from app.cluster.placement import PlacementError
 from app.core import compiled
 from app.main import create_app
@@ -69,10 +70,14 @@ def serve(options: list[str]) -> None:
     logging.basicConfig(level=settings.log_level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     warm_core()
+    http, ws = protocols(ConnectionLimits(settings.header_timeout, settings.body_timeout,
+                                          settings.max_connections))
     # a WebSocket frame over the body limit gets an error frame (app/api/routes/stream.py);
-    # one over twice the limit is not read at all: the connection closes (1009)
+    # one over twice the limit is not kept: the stream closes with 1009
     uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
-                log_level=settings.log_level, ws_max_size=2 * settings.max_body_bytes)
+                log_level=settings.log_level, http=http, ws=ws,
+                ws_max_size=2 * settings.max_body_bytes,
+                timeout_keep_alive=settings.keep_alive_timeout)
 
 
 def parse(kind: type[S], options: list[str]) -> S:
