@@ -31,6 +31,7 @@ from app.core.errors import (
     UnknownCriterion,
 )
 from app.core.flags import StateFlags
+from app.core.history import EPISODES, N_STATES, STEPS, TOTALS, History
 from app.core.lazy_tpm import LazyTransitions
 from app.core.local_risk import LocalRisk
 from app.core.observation import ObservationSpace
@@ -198,6 +199,7 @@ class Counters:
     episodes: int = 0
     model_version: int = 0
     interventions: dict[str, int] = field(default_factory=dict)
+    failures: dict[str, int] = field(default_factory=dict)  # events learned, per criterion
     streams_expired: int = 0  # streams forgotten to stay within max_streams
 
 
@@ -244,7 +246,9 @@ class Shield:
         self._free_slots: list[int] = []  # slots of streams that ended, reused first
         self._model_arrays: tuple[Any, ...] = ()  # see _arrays
         self._parts: tuple[Any, ...] = ()  # the parts' arrays it was gathered from
-        self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria})
+        self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria},
+                                 failures={c.name: 0 for c in cfg.criteria})
+        self.history = History(len(cfg.criteria))
         self._rng = np.random.default_rng(cfg.reviser.seed)
 
     def _new_local_risk(self) -> LocalRisk | None:
@@ -422,9 +426,12 @@ class Shield:
                                                          is_new, decide, by_bin, verdicts)
         self.counters.steps += 1
         self.counters.model_version += 1
+        if step.event is not None:
+            self.counters.failures[self._names[step.event]] += 1
 
         if step.done:
             self.counters.episodes += 1
+            self.history.record(self._totals())
             closing = self._closing(step, recognised, is_new, state.step)
             if cfg.transitions.across_episodes:  # A13 literal: the next reset is learned
                 state.belief, state.recognised, state.step, state.z = belief, recognised, 0, z
@@ -761,6 +768,29 @@ class Shield:
                                                          strict=True)},
         }
 
+    def _totals(self) -> list[int]:
+        """The model's totals now, in the columns of :class:`~app.core.history.History`."""
+        c = self.counters
+        return [c.episodes, c.steps, self.n_states, *(c.interventions[n] for n in self._names),
+                *(c.failures[n] for n in self._names)]
+
+    def history_view(self) -> dict[str, Any]:
+        """The totals at the end of episodes (:mod:`app.core.history`), one list per column,
+        and the totals now."""
+        rows, k, c = self.history.rows, len(self._names), self.counters
+        return {
+            "stride": self.history.stride,
+            "limit": self.history.limit,
+            "episodes": rows[:, EPISODES].tolist(),
+            "steps": rows[:, STEPS].tolist(),
+            "n_states": rows[:, N_STATES].tolist(),
+            "interventions": {n: rows[:, TOTALS + i].tolist() for i, n in enumerate(self._names)},
+            "failures": {n: rows[:, TOTALS + k + i].tolist() for i, n in enumerate(self._names)},
+            "totals": {"episodes": c.episodes, "steps": c.steps, "n_states": self.n_states,
+                       "model_version": c.model_version,
+                       "interventions": dict(c.interventions), "failures": dict(c.failures)},
+        }
+
     def next_states(self, index: int, top: int = 5) -> list[list[tuple[int, float]]]:
         """For each action, the ``top`` most likely next states of ``index`` (row of Eq. 2)."""
         one_hot = Belief(np.array([index]), np.array([1.0]))
@@ -781,8 +811,10 @@ class Shield:
                 "episodes": self.counters.episodes,
                 "model_version": self.counters.model_version,
                 "interventions": dict(self.counters.interventions),
+                "failures": dict(self.counters.failures),
                 "streams_expired": self.counters.streams_expired,
             },
+            "history": self.history.snapshot(),
             "rng": copy.deepcopy(self._rng.bit_generator.state),
             "clustering": self.clusterer.snapshot(),
             "transitions": self.transitions.snapshot(),
@@ -849,6 +881,7 @@ class Shield:
         n = self.clusterer.n_states
         if self.transitions.n_states != n or self.flags.flags.shape[0] != n:
             raise InvalidSnapshot("states, matrices and flags disagree on the state count")
+        self._restore_history(data)
         streams = data["streams"]
         if len(streams) > cfg.limits.max_streams:
             raise InvalidSnapshot(f"more than {cfg.limits.max_streams} streams",
@@ -857,6 +890,23 @@ class Shield:
                         for slot, (name, s) in enumerate(streams.items())}
         self._restore_risk(data, n)
         return self
+
+    def _restore_history(self, data: dict[str, Any]) -> None:
+        """The failure counters and the history; a snapshot written before them (they are
+        optional keys: older versions of the core ignore them) starts them from what it holds:
+        the failures its states counted, and one row of the totals now."""
+        failures = data["counters"].get("failures")
+        self.counters.failures = (
+            {c.name: int(f) for c, f in zip(self.config.criteria,
+                                            self.flags.failures.sum(axis=0), strict=True)}
+            if failures is None else
+            {c.name: stored.integer(failures[c.name], f"counters.failures.{c.name}")
+             for c in self.config.criteria})
+        self.history = History(len(self._names))
+        if data.get("history") is not None:
+            self.history = History.restore(len(self._names), data["history"], self._totals())
+        elif self.counters.episodes:
+            self.history.record(self._totals())
 
     def _restore_stream(self, field: str, data: dict[str, Any], n: int, slot: int
                         ) -> StreamState:
