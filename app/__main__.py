@@ -111,7 +111,7 @@ def describe(error: ErrorDetails) -> str:
 
 def usage_error(message: str) -> NoReturn:
     """Say what is wrong with the command line on one line and exit with status 2."""
-    print(f"error: {message}", file=sys.stderr)
+    sys.stderr.write(f"error: {message}\n")
     sys.exit(2)
 
 
