@@ -1,0 +1,28 @@
+"""Held-out worlds for issue #68, one of each kind it names: a slow failure on either side of
+one action (:mod:`~bench.heldout.greenhouse`), an unstable system whose saving direction
+depends on the state (:mod:`~bench.heldout.bicycle`), and a runaway and an extinction on either
+side of an unstable operating point (:mod:`~bench.heldout.pile`).
+
+Each module gives the environment, its fixed controller and two :class:`~bench.worlds.harness.
+World` records that :func:`bench.worlds.harness.run` runs: ``WORLD``, configured as a new user
+would with a direction per criterion, and ``WORLD_BOUNDED``, the same with a bound per failure.
+The controllers were calibrated alone; see README.md beside this module for the rule that keeps
+these worlds held out.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from bench.worlds.harness import World
+
+NAMES = ("greenhouse", "bicycle", "pile")
+
+
+def world(name: str, bounded: bool = False) -> World:
+    """The held-out world ``name``, with a bound per failure when ``bounded``."""
+    if name not in NAMES:
+        raise ValueError(f"no held-out world {name!r}; there are {', '.join(NAMES)}")
+    module = importlib.import_module(f"bench.heldout.{name}")
+    found: World = module.WORLD_BOUNDED if bounded else module.WORLD
+    return found
