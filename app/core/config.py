@@ -6,6 +6,12 @@ on construction and errors name the dotted field at fault (checked here, not by 
 that the core needs numpy and numba alone; the service validates its requests with pydantic).
 Stored configurations carry their format's ``version``; :meth:`ShieldConfig.from_stored` migrates
 older ones.
+
+Every number is finite and lies in a documented range (docs/api.md, "Configuration ranges"):
+bounds within the observations' own +-1e12, ranges no narrower than :data:`MIN_SPAN`, and sizes
+(dimensions, action bins, criteria, belief states) that bound every array a model holds, so
+that no accepted configuration can overflow a sum or square, or exhaust memory by its shape.
+A server may allow less (``app.settings.Settings``).
 """
 
 from __future__ import annotations
@@ -22,10 +28,30 @@ from app.core.errors import InvalidConfig
 
 Direction = Literal["decrease", "increase"]
 
+MAX_PHYSICAL = 1e12  # [observation / action units] largest bound, as for observations
+MIN_SPAN = 1e-6  # [same units] narrowest range high - low that a dimension or feature spans
+MAX_WEIGHT = 1e6  # largest magnitude of a feature's weights and divisors
+MAX_DIMENSIONS = 1024  # observation names and features together (a request's largest observation)
+MAX_BINS = 4096  # action bins q
+MAX_CRITERIA = 64
+MAX_TOP_K = 256  # belief states kept (limits.belief_top_k)
+MAX_NAME = 64  # [characters] of an observation, feature or criterion name
+
 
 def _check(ok: bool, field_name: str, message: str) -> None:
     if not ok:
         raise InvalidConfig(message, field=field_name)
+
+
+def _check_range(low: float, high: float, field_name: str) -> None:
+    """A range of physical values: both ends within +-MAX_PHYSICAL, at least MIN_SPAN wide."""
+    _check(all(math.isfinite(v) and abs(v) <= MAX_PHYSICAL for v in (low, high)), field_name,
+           f"bounds are finite and within +-{MAX_PHYSICAL:g}")
+    _check(high - low >= MIN_SPAN, "high", f"high must exceed low by at least {MIN_SPAN:g}")
+
+
+def _check_name(name: str, field_name: str) -> None:
+    _check(0 < len(name) <= MAX_NAME, field_name, f"a name has 1 to {MAX_NAME} characters")
 
 
 @dataclass(frozen=True)
@@ -47,12 +73,13 @@ class Feature:
     floor: float = 1.0
 
     def __post_init__(self) -> None:
-        _check(bool(self.name), "name", "a feature needs a name")
-        _check(all(math.isfinite(w) for w in self.weights + self.divide_by), "weights",
-               "weights must be finite")
-        _check(math.isfinite(self.low) and math.isfinite(self.high) and self.high > self.low,
-               "high", "high must be finite and exceed low")
-        _check(math.isfinite(self.floor) and self.floor > 0, "floor", "floor must be positive")
+        _check_name(self.name, "name")
+        for name, values in (("weights", self.weights), ("divide_by", self.divide_by)):
+            _check(all(abs(w) <= MAX_WEIGHT for w in values), name,  # (NaN fails it too)
+                   f"weights are finite and within +-{MAX_WEIGHT:g}")
+        _check_range(self.low, self.high, "low")
+        _check(1e-9 <= self.floor <= MAX_PHYSICAL, "floor",
+               f"floor lies in [1e-9, {MAX_PHYSICAL:g}]")
 
 
 @dataclass(frozen=True)
@@ -84,16 +111,23 @@ class ObservationSpec:
 
     def __post_init__(self) -> None:
         _check(len(self.names) >= 1, "names", "at least one observation dimension is needed")
+        _check(len(self.names) + len(self.features) <= MAX_DIMENSIONS, "names",
+               f"at most {MAX_DIMENSIONS} names and features together")
         _check(len(set(self.names)) == len(self.names), "names", "names must be unique")
+        for i, name in enumerate(self.names):
+            _check_name(name, f"names.{i}")
         _check(len(self.low) == len(self.names), "low", "low needs one bound per name")
         _check(len(self.high) == len(self.names), "high", "high needs one bound per name")
-        for lo, hi in zip(self.low, self.high, strict=True):
-            _check(math.isfinite(lo) and math.isfinite(hi), "low", "bounds must be finite")
-            _check(hi > lo, "high", "every high bound must exceed its low bound")
+        for i, (lo, hi) in enumerate(zip(self.low, self.high, strict=True)):
+            try:
+                _check_range(lo, hi, f"low.{i}")
+            except InvalidConfig as error:
+                error.field = f"{error.field}.{i}" if error.field == "high" else error.field
+                raise
         _check(len(self.knee) in (0, len(self.names)), "knee",
                "knee is empty or one per name (the default is for the paper's three names)")
-        _check(all(math.isfinite(k) and k >= 0 for k in self.knee), "knee",
-               "every knee is finite and >= 0")
+        _check(all(0 <= k <= MAX_PHYSICAL for k in self.knee), "knee",  # (NaN fails it too)
+               f"every knee lies in [0, {MAX_PHYSICAL:g}]")
         for i, feature in enumerate(self.features):
             _check(len(feature.weights) == len(self.names), f"features.{i}.weights",
                    "a feature needs one weight per observation name")
@@ -121,10 +155,10 @@ class ActionSpec:
     out_of_range: Literal["clip", "reject"] = "clip"
 
     def __post_init__(self) -> None:
-        _check(math.isfinite(self.low) and math.isfinite(self.high), "low", "must be finite")
-        _check(self.high > self.low, "high", "high must exceed low")
+        _check_range(self.low, self.high, "low")
         _check(math.isfinite(self.step) and self.step > 0, "step", "step must be positive")
         bins = (self.high - self.low) / self.step
+        _check(bins <= MAX_BINS, "step", f"the range holds at most {MAX_BINS} steps")
         _check(
             abs(bins - round(bins)) < 1e-9 and round(bins) >= 2,
             "step",
@@ -154,7 +188,8 @@ class Bound:
         _check(self.below is not None or self.above is not None, "below",
                "a bound needs below, above or both")
         for name, value in (("below", self.below), ("above", self.above)):
-            _check(value is None or math.isfinite(value), name, "must be finite")
+            _check(value is None or abs(value) <= MAX_PHYSICAL, name,  # (NaN fails it too)
+                   f"must be finite and within +-{MAX_PHYSICAL:g}")
         _check(self.below is None or self.above is None or self.below < self.above, "above",
                "above must exceed below")
 
@@ -169,7 +204,7 @@ class Criterion:
     bound: Bound | None = None
 
     def __post_init__(self) -> None:
-        _check(bool(self.name), "name", "a criterion needs a name")
+        _check_name(self.name, "name")
         _check(self.name != "ok", "name", "'ok' is reserved for the favourable verdict")
         _check(
             self.direction in ("decrease", "increase"),
@@ -207,9 +242,11 @@ class ClusteringConfig:
     min_variance: float = 1e-4
 
     def __post_init__(self) -> None:
-        _check(0.0 <= self.rho <= 1.0, "rho", "rho lies in [0, 1]")
-        _check(self.epsilon > 0 and math.isfinite(self.epsilon), "epsilon", "must be positive")
-        _check(self.min_variance > 0, "min_variance", "must be positive")
+        # the clustering space spans about [0, 1] a dimension (a knee: [0, 2])
+        _check(0.0 <= self.rho <= 1.0, "rho", "rho lies in [0, 1]")  # (NaN fails it too)
+        _check(0.0 < self.epsilon <= 10.0, "epsilon", "epsilon lies in (0, 10]")
+        _check(1e-12 <= self.min_variance <= 100.0, "min_variance",
+               "min_variance lies in [1e-12, 100]")
 
 
 @dataclass(frozen=True)
@@ -226,7 +263,7 @@ class TransitionConfig:
 
     def __post_init__(self) -> None:
         _check(0.0 < self.learning_rate < 1.0, "learning_rate", "phi lies in (0, 1)")
-        _check(self.prior > 0 and math.isfinite(self.prior), "prior", "must be positive")
+        _check(1e-12 <= self.prior <= 1e6, "prior", "prior lies in [1e-12, 1e6]")
 
 
 @dataclass(frozen=True)
@@ -263,8 +300,9 @@ class ReviserConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _check(self.activate_after_episodes >= 0, "activate_after_episodes", "must be >= 0")
-        _check(self.noise_k >= 0 and math.isfinite(self.noise_k), "noise_k", "must be >= 0")
+        _check(0 <= self.activate_after_episodes < 2**63, "activate_after_episodes",
+               "lies in [0, 2**63)")
+        _check(0.0 <= self.noise_k <= 1e6, "noise_k", "noise_k lies in [0, 1e6]")
         _check(1 <= self.horizon <= 16, "horizon", "horizon lies in [1, 16]")
         _check(0.0 < self.flag_min_rate <= 1.0, "flag_min_rate", "lies in (0, 1]")
         _check(0 <= self.seed < 2**63, "seed", "seed lies in [0, 2**63)")
@@ -322,7 +360,8 @@ class LimitsConfig:
     def __post_init__(self) -> None:
         _check(1 <= self.max_states <= 1_000_000, "max_states", "lies in [1, 1000000]")
         _check(1 <= self.max_streams <= 1_000_000, "max_streams", "lies in [1, 1000000]")
-        _check(self.belief_top_k >= 1, "belief_top_k", "must be >= 1")
+        _check(1 <= self.belief_top_k <= MAX_TOP_K, "belief_top_k",
+               f"lies in [1, {MAX_TOP_K}]")
 
 
 @dataclass(frozen=True)
@@ -340,6 +379,7 @@ class ShieldConfig:
 
     def __post_init__(self) -> None:
         names = [c.name for c in self.criteria]
+        _check(len(names) <= MAX_CRITERIA, "criteria", f"at most {MAX_CRITERIA} criteria")
         _check(len(set(names)) == len(names), "criteria", "criterion names must be unique")
         observed = self.observation.names
         for i, criterion in enumerate(self.criteria):
@@ -408,10 +448,15 @@ class ShieldConfig:
     def from_stored(cls, data: Mapping[str, Any]) -> ShieldConfig:
         """A whole configuration that :meth:`to_dict` wrote, maybe by an older version of this
         package, migrated to this format so that it decides as it did when it was written; one
-        that used a switch since removed is refused (:class:`InvalidConfig` names the field)."""
+        that used a switch since removed is refused (:class:`InvalidConfig` names the field),
+        and so is one that lacks a field its version wrote (:func:`_check_written`): a
+        stored configuration is whole, and a missing field would silently take a default."""
         if not isinstance(data, Mapping):
             raise InvalidConfig("expected an object")
         version = data.get("version", 1)
+        if isinstance(version, bool) or version not in range(1, CONFIG_VERSION + 1):
+            raise InvalidConfig(f"unknown configuration version {version!r}", field="version")
+        _check_written(data, version)
         if version == 1:
             data = _from_version_1(data)
         if version in (1, 2):
@@ -424,6 +469,65 @@ class ShieldConfig:
 
 
 CONFIG_VERSION = 5
+
+# The fields a stored version wrote that this version does not have ("section.field", and
+# "section.*.field" for each item of a list), with the version that dropped them; and this
+# version's fields with the version that added them (fields of every version: not listed).
+# risk.model and limits.outcome_log came within version 2's life: not every version 2 has them.
+_WENT = {"risk.prior_safe": 3, "risk.refresh_steps": 3}
+_CAME = {"risk.reach_horizon": 4, "risk.reach_radius": 4, "criteria.*.bound": 5}
+
+
+def _written(cls: type[Any], path: str) -> list[str]:
+    """Every field path of a configuration dataclass (lists' items as ``*``)."""
+    paths = []
+    for name, hint in get_type_hints(cls).items():
+        here = _join(path, name)
+        paths.append(here)
+        if get_origin(hint) is UnionType:
+            hint = next(a for a in get_args(hint) if a is not type(None))
+        if get_origin(hint) is tuple and dataclasses.is_dataclass(get_args(hint)[0]):
+            paths += _written(get_args(hint)[0], f"{here}.*")
+        elif dataclasses.is_dataclass(hint):
+            paths += _written(hint, here)  # type: ignore[arg-type]
+    return paths
+
+
+def _check_written(data: Mapping[str, Any], version: int) -> None:
+    """Refuse a stored configuration of ``version`` (2 on) that lacks a field its version
+    wrote, naming it. Version 1 gained fields over its life and its migration says what a
+    missing one meant."""
+    if version < 2:
+        return
+    required = [p for p in _written(ShieldConfig, "") if _came(p) <= version]
+    required += [p for p, gone in _WENT.items() if version < gone]
+    for path in required:
+        _require(data, path.split("."), "")
+
+
+def _came(path: str) -> int:
+    """The version that added a field or the field it lies in (1: every version has it)."""
+    keys = path.split(".")
+    return max(_CAME.get(".".join(keys[:i]), 1) for i in range(1, len(keys) + 1))
+
+
+def _require(part: Any, keys: list[str], at: str) -> None:
+    """Follow ``keys`` through ``part`` (``*``: every item of a list); refuse a missing key.
+    A part of another type, or a null optional section, is left to the build to judge."""
+    if not keys:
+        return
+    key, rest = keys[0], keys[1:]
+    if key == "*":
+        if isinstance(part, list | tuple):
+            for i, item in enumerate(part):
+                _require(item, rest, _join(at, str(i)))
+        return
+    if not isinstance(part, Mapping):
+        return
+    if key not in part:
+        raise InvalidConfig(f"the stored configuration lacks {_join(at, key)!r}",
+                            field=_join(at, key))
+    _require(part[key], rest, _join(at, key))
 
 
 def _from_version_1(data: Mapping[str, Any]) -> dict[str, Any]:
@@ -489,8 +593,9 @@ def _from_version_3(data: Mapping[str, Any]) -> dict[str, Any]:
 
 def _from_version_4(data: Mapping[str, Any]) -> dict[str, Any]:
     """Version 4 to 5: criteria may declare a bound (:class:`Bound`), and the default ones
-    do. A configuration written before decided without bounds: one that left its criteria
-    out gets the paper's without them (one that lists them lacks bounds already)."""
+    do. A configuration written before decided without bounds: one of version 1 that left its
+    criteria out gets the paper's without them (one that lists them lacks bounds already;
+    versions 2 to 4 always list them, :func:`_check_written`)."""
     out = _copy(data)
     out.setdefault("criteria", [{"name": c.name, "direction": c.direction}
                                 for c in PAPER_CRITERIA])
@@ -573,7 +678,13 @@ def _convert(hint: Any, value: Any, path: str) -> Any:
     if hint is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise InvalidConfig("expected a number", field=path)
-        return float(value)
+        try:
+            number = float(value)
+        except OverflowError:  # an integer beyond any float
+            number = math.inf
+        if not math.isfinite(number):
+            raise InvalidConfig("expected a finite number", field=path)
+        return number
     if hint is str:
         if not isinstance(value, str):
             raise InvalidConfig("expected a string", field=path)

@@ -349,8 +349,8 @@ def test_a_configuration_stored_before_bounds_decides_without_them() -> None:
     for criterion in stored["criteria"]:
         del criterion["bound"]
     assert all(c.bound is None for c in ShieldConfig.from_stored(stored).criteria)
-    del stored["criteria"]  # the defaults of version 4 had none
-    loaded = ShieldConfig.from_stored(stored)
-    assert [(c.name, c.bound) for c in loaded.criteria] == [("collision", None),
-                                                          ("large_distance", None)]
+    del stored["criteria"]  # every version from 2 on wrote its criteria: damage, refused
+    with pytest.raises(InvalidConfig) as raised:
+        ShieldConfig.from_stored(stored)
+    assert raised.value.field == "criteria"
     assert ShieldConfig.from_stored(ShieldConfig().to_dict()) == ShieldConfig()

@@ -328,11 +328,13 @@ def test_a_knee_keeps_the_views_in_physical_units() -> None:
     assert shield.state_view(0)["centre"] == pytest.approx([16.0, 100.0, 8.0])
 
 
-@pytest.mark.parametrize("knee", [[20.0], [0.0, -1.0, 0.0], [0.0, math.inf, 0.0]])
-def test_a_bad_knee_names_its_field(knee: list[float]) -> None:
+@pytest.mark.parametrize(("knee", "field"), [
+    ([20.0], "observation.knee"), ([0.0, -1.0, 0.0], "observation.knee"),
+    ([0.0, math.inf, 0.0], "observation.knee.1")])
+def test_a_bad_knee_names_its_field(knee: list[float], field: str) -> None:
     with pytest.raises(ShieldError) as raised:
         ShieldConfig.from_dict({"observation": {"knee": knee}})
-    assert raised.value.field == "observation.knee"
+    assert raised.value.field == field
 
 
 def test_an_empty_model_has_empty_views_and_snapshots() -> None:
