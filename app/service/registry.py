@@ -4,7 +4,15 @@ Each model has its own lock: steps to one model are applied one at a time, in th
 lock is taken, while other models proceed in parallel. Every accepted learning request is
 journaled before it is applied (see :mod:`app.service.storage`), so a crash loses nothing that
 was acknowledged under ``fsync=always``. A bad request is validated in full first and changes
-nothing.
+nothing. A step sent with an idempotency key is applied once: sent again, it is answered with
+its first decision (:mod:`app.service.idempotency`).
+
+At start-up each model is read back from its files. A journal whose last record is torn or
+damaged, with nothing readable after it, is repaired: cut after its last good record (the cut
+bytes kept beside it) and a snapshot taken, said in an error line. Any other damage (a snapshot
+that cannot be read, a journal damaged before readable records or missing beside its snapshot,
+a bad ``config.json``) sets the model aside with its files untouched. Every model has a
+snapshot from its creation on, so a missing journal is always told apart from an empty one.
 """
 
 from __future__ import annotations
@@ -20,12 +28,14 @@ from typing import Any
 from app.core import Decision, InvalidConfig, Shield, ShieldConfig, ShieldError
 from app.core.shield import StepInput
 from app.service import codec
+from app.service.idempotency import Entry, KeyReused, KeyWindow, fingerprint
 from app.service.storage import Fsync, ModelStore
 
 log = logging.getLogger("app.registry")
 
 NAME = re.compile(r"[a-z0-9][a-z0-9_-]{0,63}")
 DEFAULT_MODEL = "default"
+IDEMPOTENCY_WINDOW = 1024  # keyed steps a model remembers, by default
 
 
 class UnknownModel(ShieldError):
@@ -74,6 +84,7 @@ class Model:
     since_snapshot: int = 0
     watchers: list[Watcher] = field(default_factory=list)
     decisions: dict[str, int] = field(default_factory=dict)  # served here, by reason
+    keys: KeyWindow = field(default_factory=lambda: KeyWindow(IDEMPOTENCY_WINDOW))
 
 
 Watcher = Callable[[dict[str, Any]], None]
@@ -92,15 +103,24 @@ class Step:
     applied_action: float | None = None
     learn: bool = True
     shadow: bool = False
+    key: str | None = None  # the idempotency key: sent again, answered, not applied again
 
     def journal(self) -> dict[str, Any]:
-        """The record that replays this step."""
-        return {"o": list(self.observation), "a": self.action, "s": self.stream,
-                "e": self.event, "d": self.done, "p": self.applied_action, "h": self.shadow}
+        """The record that replays this step (and remembers its key)."""
+        record = {"o": list(self.observation), "a": self.action, "s": self.stream,
+                  "e": self.event, "d": self.done, "p": self.applied_action, "h": self.shadow}
+        if self.key is not None:
+            record["k"] = self.key
+        return record
 
     @classmethod
     def from_journal(cls, r: dict[str, Any]) -> Step:
-        return cls(r["o"], r["a"], r["s"], r["e"], r["d"], r["p"], True, r["h"])
+        return cls(r["o"], r["a"], r["s"], r["e"], r["d"], r["p"], True, r["h"], r.get("k"))
+
+    def fingerprint(self) -> str:
+        """What a step sent again under the same key must match."""
+        return fingerprint(self.observation, self.action, self.stream, self.event, self.done,
+                           self.applied_action, self.learn, self.shadow)
 
 
 class ModelRegistry:
@@ -109,8 +129,10 @@ class ModelRegistry:
     def __init__(self, data_dir: Path | None = None, fsync: Fsync = "interval",
                  snapshot_every: int = 50_000,
                  default_config: ShieldConfig | None = None, *, max_models: int = 1000,
-                 max_states: int = 100_000, create_default: bool = True) -> None:
+                 max_states: int = 100_000, create_default: bool = True,
+                 idempotency_window: int = IDEMPOTENCY_WINDOW) -> None:
         self.data_dir = data_dir
+        self.idempotency_window = idempotency_window
         self.max_models = max_models
         self.max_states = max_states
         self.fsync = fsync
@@ -186,23 +208,57 @@ class ModelRegistry:
                     model.store.sync()
 
     def _load(self, directory: Path) -> Model | None:
-        """The model stored in ``directory`` (None for a directory that holds no model)."""
+        """The model stored in ``directory`` (None for a directory that holds no model), a
+        damaged tail of its journal repaired; :class:`DamagedModel` for any other damage,
+        before any file is changed."""
         store = ModelStore(directory, self.fsync)
         if not store.config_path.exists():
             if store.snapshot_path.exists() or store.journal_path.exists():
                 raise DamagedModel("config.json is missing beside the model's other files")
             return None
+        try:
+            config = ShieldConfig.from_stored(store.read_config())
+        except Exception as error:
+            raise DamagedModel(f"config.json cannot be read ({type(error).__name__}: "
+                               f"{error})") from error
         blob = store.read_snapshot()
-        if blob is not None:
-            shield = Shield.from_snapshot(codec.from_npz(blob))
-            if not store.journal_path.exists():
-                log.error("%s: journal.log is missing; steps learned after the snapshot "
-                          "(version %d), if any, are lost", directory.name,
-                          shield.counters.model_version)
+        if blob is None:  # a model that never learned, or one stored before snapshots at birth
+            shield = Shield(config)
         else:
-            shield = Shield(ShieldConfig.from_stored(store.read_config()))
+            shield = Shield.from_snapshot(codec.from_npz(blob))
+            if not store.journal_path.exists() and not store.rotated_path.exists():
+                raise DamagedModel("journal.log is missing: the steps learned after the "
+                                   f"snapshot (version {shield.counters.model_version}) are "
+                                   "not known")
+        records, damage = store.scan()
+        if damage is not None and not damage.at_tail:
+            raise DamagedModel(f"{damage.describe()}, and readable records follow it: the "
+                               "damage is not at the end of the journal")
+        model = Model(directory.name, shield, store, keys=KeyWindow(self.idempotency_window))
+        replayed = self._replay(model, records)
+        if damage is not None:
+            kept = store.cut(damage)
+            log.error("model %r repaired: %s; the journal now ends at its last good record "
+                      "(version %d, %d steps replayed), the cut bytes are kept in %s, and a "
+                      "snapshot was taken", directory.name, damage.describe(),
+                      shield.counters.model_version, replayed,
+                      ", ".join(p.name for p in kept) or "no file (nothing was cut)")
+        if damage is not None or blob is None:  # the repair, or the snapshot of its birth
+            self._snapshot(model)
+        log.info("model %r: %d states, version %d (%d journaled steps replayed)",
+                 directory.name, shield.n_states, shield.counters.model_version, replayed)
+        return model
+
+    @staticmethod
+    def _replay(model: Model, records: Sequence[dict[str, Any]]) -> int:
+        """Apply the journal's records the model's snapshot does not hold, and remember their
+        keys; the steps replayed."""
+        shield = model.shield
         replayed = 0
-        for record in store.records():
+        for record in records:
+            if "w" in record:  # the keys remembered when a snapshot was taken
+                model.keys.load(record["w"])
+                continue
             if record["v"] <= shield.counters.model_version:
                 continue  # already in the snapshot
             start = record["v"] - len(record["steps"])
@@ -210,12 +266,16 @@ class ModelRegistry:
                 raise DamagedModel(f"the journal goes on from version {start}, the model is "
                                    f"at version {shield.counters.model_version} (a snapshot "
                                    "missing or older than the journal)")
-            for step in record["steps"]:
-                shield.step(**vars(Step.from_journal(step)))
+            for data in record["steps"]:
+                step = Step.from_journal(data)
+                decision = shield.step(step.observation, step.action, stream=step.stream,
+                                       event=step.event, done=step.done,
+                                       applied_action=step.applied_action, shadow=step.shadow)
+                if step.key is not None:
+                    model.keys.remember(step.key, step.fingerprint(), decision)
                 replayed += 1
-        log.info("model %r: %d states, version %d (%d journaled steps replayed)",
-                 directory.name, shield.n_states, shield.counters.model_version, replayed)
-        return Model(directory.name, shield, store, since_snapshot=replayed)
+        model.since_snapshot = replayed
+        return replayed
 
     # --- models ---------------------------------------------------------------------------
 
@@ -245,14 +305,20 @@ class ModelRegistry:
             if name in self._models:
                 raise ModelExists(f"a model named {name!r} exists", field="name")
             self._check_room(name)
-            model = Model(name, Shield(config), self._store(name))
+            model = self._new_model(name, Shield(config))
             if model.store is not None:
                 model.store.create(config.to_dict())
+                self._snapshot(model)  # from its birth: a missing journal is then damage
             self._models[name] = model
             return model
 
-    def restore(self, name: str, snapshot: dict[str, Any]) -> Model:
-        """Create or replace a model from a snapshot (the snapshot is stored at once)."""
+    def _new_model(self, name: str, shield: Shield) -> Model:
+        return Model(name, shield, self._store(name), keys=KeyWindow(self.idempotency_window))
+
+    def restore(self, name: str, snapshot: dict[str, Any], keys: Sequence[Entry] = ()
+                ) -> Model:
+        """Create or replace a model from a snapshot (the snapshot is stored at once), with
+        the idempotency keys it remembers (a model moved from another shard)."""
         check_name(name)
         self._refuse_quarantined(name)
         shield = Shield.from_snapshot(snapshot)
@@ -264,7 +330,8 @@ class ModelRegistry:
                 with old.lock, old.snapshotting:
                     if old.store is not None:
                         old.store.close()
-            model = Model(name, shield, self._store(name))
+            model = self._new_model(name, shield)
+            model.keys.load(keys)
             if model.store is not None:
                 model.store.create(shield.config.to_dict())
                 self._snapshot(model)
@@ -311,10 +378,14 @@ class ModelRegistry:
     @staticmethod
     def _take(model: Model) -> dict[str, Any]:
         """The model's state and a rotated journal: what a snapshot write then stores, with
-        the model's lock released or not."""
+        the model's lock released or not. The new journal starts with the keys the model
+        remembers, which the snapshot does not hold."""
         assert model.store is not None
         data = model.shield.snapshot()
         model.store.rotate()
+        if len(model.keys):
+            model.store.append({"v": model.shield.counters.model_version,
+                                "w": model.keys.entries()})
         model.since_snapshot = 0
         return data
 
@@ -351,10 +422,17 @@ class ModelRegistry:
         try:
             try:
                 self._check_current(name, model)
+                if step.key is not None:
+                    print_ = step.fingerprint()
+                    remembered = model.keys.recall(step.key, print_, "idempotency_key")
+                    if remembered is not None:
+                        return remembered  # applied before: its first decision
                 checked = _validate(model.shield, step, None)
                 if step.learn:
                     self._journal(model, [step])
                 decision = self._apply(model, step, checked)
+                if step.key is not None and step.learn:
+                    model.keys.remember(step.key, print_, decision)
                 taking = self._snapshot_due(model)
                 data = self._take(model) if taking else None
             finally:
@@ -369,6 +447,7 @@ class ModelRegistry:
     def step_many(self, steps: Sequence[tuple[str, Step]],
                   blocking: bool = True) -> list[Decision] | None:
         """Steps across models, in order; one bad step (or unknown model) rejects them all.
+        A step whose key a model remembers is answered with its first decision, not applied.
 
         With ``blocking=False`` nothing is done (None) if a model's lock is taken.
         """
@@ -382,16 +461,29 @@ class ModelRegistry:
                         return None
                     held.append(models[name])
                     self._check_current(name, models[name])
-                inputs = [_validate(models[name].shield, step, i)
-                          for i, (name, step) in enumerate(steps)]
+                prints = [None if step.key is None else step.fingerprint()
+                          for _, step in steps]
+                remembered = self._recall(models, steps, prints)
+                inputs = [None if known is not None else _validate(models[name].shield, step, i)
+                          for i, ((name, step), known) in enumerate(zip(steps, remembered,
+                                                                        strict=True))]
                 learned: dict[str, list[Step]] = {}
-                for name, step in steps:
-                    if step.learn:
+                for (name, step), known in zip(steps, remembered, strict=True):
+                    if step.learn and known is None:
                         learned.setdefault(name, []).append(step)
                 for name, group in learned.items():
                     self._journal(models[name], group)
-                decisions = [self._apply(models[name], step, checked)
-                             for (name, step), checked in zip(steps, inputs, strict=True)]
+                decisions = []
+                for (name, step), known, checked, print_ in zip(steps, remembered, inputs,
+                                                                prints, strict=True):
+                    if checked is None:
+                        assert known is not None
+                        decisions.append(known)
+                        continue
+                    decision = self._apply(models[name], step, checked)
+                    if step.key is not None and print_ is not None and step.learn:
+                        models[name].keys.remember(step.key, print_, decision)
+                    decisions.append(decision)
                 taken = []
                 for model in models.values():
                     if self._snapshot_due(model):
@@ -406,6 +498,30 @@ class ModelRegistry:
             for model in due:
                 model.snapshotting.release()
         return decisions
+
+    @staticmethod
+    def _recall(models: dict[str, Model], steps: Sequence[tuple[str, Step]],
+                prints: Sequence[str | None]) -> list[Decision | None]:
+        """Each step's first decision if its model remembers its key, else None; a key named
+        twice in one request for one model, or more keys for a model than it remembers, is
+        refused."""
+        seen: dict[tuple[str, str], int] = {}
+        keyed: dict[str, int] = {}
+        remembered: list[Decision | None] = []
+        for i, ((name, step), print_) in enumerate(zip(steps, prints, strict=True)):
+            if step.key is None or print_ is None:
+                remembered.append(None)
+                continue
+            field = f"steps.{i}.idempotency_key"
+            if (name, step.key) in seen:
+                raise KeyReused(f"idempotency key {step.key!r} names step {seen[name, step.key]} "
+                                "of this request already; a key names one step", field=field)
+            seen[name, step.key] = i
+            keyed[name] = keyed.get(name, 0) + 1
+            remembered.append(models[name].keys.recall(step.key, print_, field))
+        for name, count in keyed.items():
+            models[name].keys.check_room(count, "steps")
+        return remembered
 
     def _check_current(self, name: str, model: Model) -> None:
         """Refuse a model that was replaced or deleted while its lock was awaited."""
@@ -462,7 +578,10 @@ class ModelRegistry:
 def _validate(shield: Shield, step: Step, index: int | None) -> StepInput:
     """The step checked by its model; a refusal names the step's ``index`` in a batch."""
     try:
-        return shield.validate(**vars(step))
+        return shield.validate(step.observation, step.action, stream=step.stream,
+                               event=step.event, done=step.done,
+                               applied_action=step.applied_action, learn=step.learn,
+                               shadow=step.shadow)
     except ShieldError as error:
         if index is not None:
             error.field = f"steps.{index}.{error.field}" if error.field else f"steps.{index}"

@@ -7,8 +7,15 @@ rotated to ``journal.1.log`` when the model's state is copied (under the model's
 snapshot is written (temporary file, fsync, rename) and ``journal.1.log`` removed afterwards,
 while the model goes on learning into a new journal. Because learning is deterministic, the
 snapshot plus the records of both journals after its version rebuild the model exactly, at
-every moment in between. A torn last line (a crash mid-write) fails its checksum and is dropped
-with a log line.
+every moment in between.
+
+Reading the journals back (:meth:`ModelStore.scan`) finds the first line that is not a whole
+record (torn by a crash mid-write, failing its checksum, garbage) and says whether any readable
+record follows it. Damage that nothing readable follows is a damaged tail: the registry repairs
+it as Redis repairs a truncated append-only file, cutting the journal after its last good
+record (:meth:`ModelStore.cut`, the cut bytes kept beside it) and taking a snapshot, so that new
+records never land after the damaged bytes. Damage that readable records follow is not a torn
+write: the model is set aside with its files untouched.
 """
 
 from __future__ import annotations
@@ -19,7 +26,8 @@ import os
 import shutil
 import threading
 import zlib
-from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Literal
 
@@ -138,12 +146,50 @@ class ModelStore:
         result: dict[str, Any] = json.loads(self.config_path.read_text())
         return result
 
-    def records(self) -> Iterator[dict[str, Any]]:
-        """Journal records in order, the rotated ones first; a damaged line ends its file's
-        replay with a log line (what follows it can then not continue the model)."""
-        for path in (self.rotated_path, self.journal_path):
-            if path.exists():
-                yield from _records(path)
+    def scan(self) -> tuple[list[dict[str, Any]], Damage | None]:
+        """The journal records in order, the rotated ones first, up to the first damaged
+        line; and that damage, if any."""
+        records: list[dict[str, Any]] = []
+        paths = [p for p in (self.rotated_path, self.journal_path) if p.exists()]
+        for i, path in enumerate(paths):
+            data = path.read_bytes()
+            start = 0
+            for number, line in enumerate(data.split(b"\n"), start=1):
+                end = start + len(line)
+                whole = end < len(data)  # a line without its newline is torn
+                record = _parse(line) if whole else None
+                if record is None:
+                    if not line and not whole:
+                        break  # the end of the file
+                    later = data[end + 1:].split(b"\n") if whole else []
+                    later += [ln for p in paths[i + 1:] for ln in p.read_bytes().split(b"\n")]
+                    cuts = [(path, start)] + [(p, 0) for p in paths[i + 1:]]
+                    at_tail = not any(_parse(ln) is not None for ln in later)
+                    return records, Damage(path, number, start, len(data) - start,
+                                           at_tail, tuple(cuts))
+                records.append(record)
+                start = end + 1
+        return records, None
+
+    def cut(self, damage: Damage) -> list[Path]:
+        """Cut the journals at ``damage`` (a damaged tail): each file ends at its last good
+        record, the bytes cut from it are kept in ``<file>.damaged-<UTC time>``; all durable
+        before this returns. The copies written."""
+        stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S.%fZ")
+        kept = []
+        for path, offset in damage.cuts:
+            with open(path, "r+b") as f:
+                f.seek(offset)
+                tail = f.read()
+                if tail:
+                    copy = path.with_name(f"{path.name}.damaged-{stamp}")
+                    write_atomic(copy, tail)
+                    kept.append(copy)
+                f.truncate(offset)
+                f.flush()
+                os.fsync(f.fileno())
+        sync_directory(self.directory)
+        return kept
 
     def close(self) -> None:
         """Flush and close the journal."""
@@ -159,18 +205,22 @@ class ModelStore:
         shutil.rmtree(self.directory, ignore_errors=True)
 
 
-def _records(path: Path) -> Iterator[dict[str, Any]]:
-    lines = path.read_bytes().split(b"\n")
-    complete, tail = lines[:-1], lines[-1]
-    for number, line in enumerate(complete, start=1):
-        record = _parse(line)
-        if record is None:
-            log.error("%s: journal line %d is damaged; dropping it and what follows", path,
-                      number)
-            return
-        yield record
-    if tail:
-        log.warning("%s: dropped a torn last journal record (%d bytes)", path, len(tail))
+@dataclass(frozen=True)
+class Damage:
+    """Where the journals stop being readable: line ``line`` of ``path``, ``offset`` bytes
+    into it, ``size`` bytes to its end; ``at_tail`` when no readable record follows (in this
+    file or the next); ``cuts``: each file with the offset its good records end at."""
+
+    path: Path
+    line: int
+    offset: int
+    size: int
+    at_tail: bool
+    cuts: tuple[tuple[Path, int], ...]
+
+    def describe(self) -> str:
+        return (f"{self.path.name} line {self.line} ({self.size} bytes from offset "
+                f"{self.offset} to the end of the file) is not a whole journal record")
 
 
 def _parse(line: bytes) -> dict[str, Any] | None:

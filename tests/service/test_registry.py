@@ -47,7 +47,7 @@ def test_snapshot_plus_journal_tail(tmp_path: Path) -> None:
     assert_same(second.get("default").shield.snapshot(), first.get("default").shield.snapshot())
 
 
-def test_a_torn_last_record_is_dropped_with_a_log_line(
+def test_a_torn_last_record_is_cut_off_kept_beside_the_journal_and_logged(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     first = reopen(tmp_path)
@@ -59,7 +59,9 @@ def test_a_torn_last_record_is_dropped_with_a_log_line(
     with caplog.at_level(logging.WARNING):
         second = reopen(tmp_path)
     assert second.get("default").shield.counters.model_version == version
-    assert "torn last journal record" in caplog.text
+    assert "model 'default' repaired: journal.log line 31" in caplog.text
+    (kept,) = journal.parent.glob("journal.log.damaged-*")
+    assert kept.read_bytes() == b'0badc0de {"v": 31, "steps": [{"o": [1'
 
 
 def test_models_survive_a_clean_restart_and_deletion_removes_files(tmp_path: Path) -> None:
