@@ -35,7 +35,8 @@ def create_app(settings: Settings | None = None, *, create_default: bool = True)
     settings = settings or get_settings()
     registry = ModelRegistry(settings.data_dir, settings.fsync, settings.snapshot_every,
                              default_config(settings), max_models=settings.max_models,
-                             max_states=settings.max_states, create_default=create_default)
+                             max_states=settings.max_states, create_default=create_default,
+                             idempotency_window=settings.idempotency_window)
 
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:

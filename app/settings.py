@@ -54,6 +54,13 @@ class Settings(BaseSettings):
     snapshot_every: int = Field(
         50_000, ge=1, description="Steps of a model between two snapshots of it."
     )
+    idempotency_window: int = Field(
+        1024, ge=1, le=65_536,
+        description="Steps sent with an idempotency key that each model remembers (the last "
+        "ones, about 0.5 KB each): a step sent again within them is answered with its first "
+        "decision, not applied again; one request carries at most this many keyed steps of a "
+        "model (413).",
+    )
     header_timeout: float = Field(
         10.0, gt=0, le=3600,
         description="Seconds a request's line and headers may take to arrive, from the "

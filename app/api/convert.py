@@ -26,4 +26,4 @@ def _plain(value: Any) -> dict[str, Any]:
 
 def to_step(body: ReviseRequest) -> Step:
     return Step(body.observation, body.action, body.stream, body.event, body.done,
-                body.applied_action, body.learn, body.shadow)
+                body.applied_action, body.learn, body.shadow, body.idempotency_key)

@@ -15,6 +15,7 @@ from starlette.requests import HTTPConnection
 
 from app.api.auth import given_token, token_ok
 from app.core import InvalidConfig, InvalidSnapshot, ShieldError
+from app.service.idempotency import KeyReused, TooManyKeys
 from app.service.registry import (
     InvalidName,
     ModelExists,
@@ -34,6 +35,8 @@ STATUS: dict[type[ShieldError], int] = {
     InvalidName: 422,
     InvalidConfig: 422,
     InvalidSnapshot: 422,
+    KeyReused: 422,
+    TooManyKeys: 413,
 }
 
 

@@ -49,6 +49,14 @@ class ReviseRequest(BaseModel):
     shadow: bool = Field(False, strict=True,
                          description="True: learn and report what would be done, but return "
                          "the proposed action.")
+    idempotency_key: str | None = Field(
+        None, min_length=1, max_length=128, strict=True,
+        description="Names this step (a fresh UUID, say) so that it can be sent again safely: "
+        "a step whose key the model remembers (its last idempotency_window keyed steps, "
+        "across restarts) is answered with its first decision and not applied again; a key "
+        "sent with another step is refused (422 idempotency_key_reused).",
+        examples=["3f0c2a4e9b7d4c1e8a6f5b2d0e9c7a18"],
+    )
 
 
 class ModelStep(ReviseRequest):
@@ -164,7 +172,7 @@ class ErrorDetail(BaseModel):
     code: str = Field(
         description="Stable machine-readable code: invalid_json, invalid_body, invalid_query, "
         "invalid_observation, invalid_action, unknown_criterion, invalid_name, invalid_config, "
-        "invalid_snapshot (422); unknown_model, not_found (404); model_exists, too_many_models "
+        "invalid_snapshot, idempotency_key_reused (422); unknown_model, not_found (404); model_exists, too_many_models "
         "(409); too_large (413); unauthorized (401); model_quarantined (503); "
         "unsupported_frame (a binary WebSocket frame).",
         examples=["invalid_body"])

@@ -3,11 +3,11 @@ one action (:mod:`~bench.heldout.greenhouse`), an unstable system whose saving d
 depends on the state (:mod:`~bench.heldout.bicycle`), and a runaway and an extinction on either
 side of an unstable operating point (:mod:`~bench.heldout.pile`).
 
-Each module gives the environment, its fixed controller and two :class:`~bench.worlds.harness.
-World` records that :func:`bench.worlds.harness.run` runs: ``WORLD``, configured as a new user
-would with a direction per criterion, and ``WORLD_BOUNDED``, the same with a bound per failure.
-The controllers were calibrated alone; see README.md beside this module for the rule that keeps
-these worlds held out.
+Each module gives the environment, its fixed controller and two
+:class:`~bench.worlds.harness.World` records that :func:`bench.worlds.harness.run` runs:
+``WORLD``, configured as a new user would with a direction per criterion, and
+``WORLD_BOUNDED``, the same with a bound per failure. The controllers were calibrated alone;
+README.md beside this module gives the rule that keeps these worlds held out.
 """
 
 from __future__ import annotations

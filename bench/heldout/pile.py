@@ -6,11 +6,12 @@ The pile's power follows the reactivity: above critical it grows, below it dies 
 change of the rods jumps the power at once (the prompt jump) before the delayed neutrons carry
 it on. Its fuel warms with the power (5 s behind it) and, as in some graphite piles, warmer
 fuel adds reactivity: a little more power makes it hotter and so more reactive, a little less
-makes it cooler and less reactive. Every operating point is unstable, and the pile drifts off
-within a minute unless the rods hold it. The coolant's inlet temperature wanders and adds its
-own reactivity through the fuel. The action is the rods' reactivity, in [-0.3, 0.3] dollars.
-Failures: ``runaway``, the power above 1.6 of rated (fought by less reactivity), and
-``extinction``, the power below 0.25 (the chain reaction dying away; fought by more).
+makes it cooler and less reactive. Every operating point is unstable: left alone at rated
+power, the pile runs away or dies away within 0.5-2 minutes. The coolant's inlet temperature
+wanders and adds its own reactivity through the fuel. The action is the rods' reactivity, in
+[-0.3, 0.3] dollars. Failures: ``runaway``, the power above 1.5 of rated (fought by less
+reactivity), and ``extinction``, the power below 0.3 (the chain reaction dying away; fought
+by more).
 
 Point kinetics with one group of delayed neutrons and the prompt jump, in dollars:
 power n = c / (1 - rho); precursors dc/dt = lambda (n - c); fuel dT/dt = (T_c + R n - T) / tau;
@@ -19,13 +20,13 @@ and the design inlet temperature.
 
 The controller is the pile's power regulator: rods set in proportion to the gap between the
 power asked and the power read, plus the integral of that gap, on an ionisation chamber that
-lags 4 s behind the power. Its gains are drawn per episode (a regulator tuned now too tight,
-now too loose), and the power asked changes every 30-90 s between 0.5 and 1.3 of rated, so
-that it overshoots and lags. Time step 0.5 s; at most 300 steps (150 s), ending at the first
-failure. The shield observes ``[power, fuel temperature, inlet temperature, power asked]``:
-fractions of rated power and degC. The controller's task figure (``info["task"]``, per step)
-is the absolute gap between the power and the power asked, in fractions of rated power. Held
-out: not used to choose any default (bench/heldout/README.md).
+lags 4 s behind the power. Its gains are drawn per episode (a regulator tuned now well, now
+too loose to catch the drift), and the power asked changes every 30-90 s between 0.5 and 1.25
+of rated, so that it overshoots and lags. Time step 0.5 s; at most 300 steps (150 s), ending
+at the first failure. The shield observes ``[power, fuel temperature, inlet temperature, power
+asked]``: fractions of rated power and degC. The controller's task figure (``info["task"]``,
+per step) is the absolute gap between the power and the power asked, in fractions of rated
+power. Held out: not used to choose any default (bench/heldout/README.md).
 """
 
 from __future__ import annotations
