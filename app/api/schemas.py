@@ -172,9 +172,9 @@ class ErrorDetail(BaseModel):
     code: str = Field(
         description="Stable machine-readable code: invalid_json, invalid_body, invalid_query, "
         "invalid_observation, invalid_action, unknown_criterion, invalid_name, invalid_config, "
-        "invalid_snapshot, idempotency_key_reused (422); unknown_model, not_found (404); model_exists, too_many_models "
-        "(409); too_large (413); unauthorized (401); model_quarantined (503); "
-        "unsupported_frame (a binary WebSocket frame).",
+        "invalid_snapshot, idempotency_key_reused (422); unknown_model, not_found (404); "
+        "model_exists, too_many_models (409); too_large (413); unauthorized (401); "
+        "model_quarantined (503); unsupported_frame (a binary WebSocket frame).",
         examples=["invalid_body"])
     message: str = Field(description="What is wrong, for people.")
     field: str | None = Field(None, description="The input at fault, dotted.",
