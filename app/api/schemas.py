@@ -168,6 +168,43 @@ class ModelList(BaseModel):
     models: list[ModelSummary]
 
 
+class HistoryTotals(BaseModel):
+    """A model's totals now."""
+
+    episodes: int = Field(description="Finished episodes.")
+    steps: int = Field(description="Learning steps (an episode's closing step included).")
+    n_states: int = Field(description="States.")
+    model_version: int
+    interventions: dict[str, int] = Field(description="Revised actions per criterion.")
+    failures: dict[str, int] = Field(description="Failures (events learned) per criterion.")
+
+
+class ModelHistory(BaseModel):
+    """A model's totals at the end of its episodes, one list per column (row k of every
+    list belongs together), and its totals now. Any two rows give what happened between
+    them: revisions per episode are the difference of ``interventions`` over the difference
+    of ``episodes``; the share of revised actions divides by the difference of ``steps``
+    less that of ``episodes`` (the closing steps propose no action)."""
+
+    name: str
+    stride: int = Field(description="Episodes between two rows: 1 until the history holds "
+                        "`limit` rows, then doubled each time it fills (every other row "
+                        "dropped), so that the rows span the model's whole life.",
+                        examples=[1])
+    limit: int = Field(description="The most rows a model keeps.", examples=[512])
+    episodes: list[int] = Field(description="Finished episodes at each row: a multiple of "
+                                "`stride`.", examples=[[1, 2, 3]])
+    steps: list[int] = Field(description="Learning steps by then.", examples=[[26, 51, 77]])
+    n_states: list[int] = Field(description="States by then.", examples=[[4, 6, 6]])
+    interventions: dict[str, list[int]] = Field(
+        description="Revised actions per criterion by then.",
+        examples=[{"collision": [0, 3, 5], "large_distance": [0, 0, 1]}])
+    failures: dict[str, list[int]] = Field(
+        description="Failures (events learned) per criterion by then.",
+        examples=[{"collision": [1, 1, 2], "large_distance": [0, 0, 0]}])
+    totals: HistoryTotals = Field(description="The totals now, from which a live view goes on.")
+
+
 class ErrorDetail(BaseModel):
     code: str = Field(
         description="Stable machine-readable code: invalid_json, invalid_body, invalid_query, "

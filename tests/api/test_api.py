@@ -237,6 +237,7 @@ def test_token_is_required_everywhere_but_health(strict_client: TestClient) -> N
     assert c.get("/readyz").status_code == 200
     for method, path in [("post", "/revise"), ("post", "/models/default/revise"),
                          ("get", "/models"), ("get", "/model"), ("get", "/metrics"),
+                         ("get", "/models/default/history"),
                          ("post", "/models/default/reset"), ("batch", "/revise/batch"),
                          ("batch", "/models/default/revise/batch")]:
         if method == "batch":
@@ -409,3 +410,30 @@ def test_a_state_reports_its_flag_failures_and_next_states(client: TestClient) -
     assert all(len(a["states"]) <= 2 for a in state["next"])
     missing = client.get("/models/default/states/999")
     assert missing.status_code == 404 and missing.json()["error"]["field"] == "index"
+
+
+def test_the_history_holds_the_totals_at_each_episode_end(client: TestClient) -> None:
+    for k in range(3):
+        episode(client, crash=k != 1)
+    r = client.get("/models/default/history")
+    assert r.status_code == 200
+    history = r.json()
+    assert (history["name"], history["stride"]) == ("default", 1)
+    assert history["episodes"] == [1, 2, 3] and history["steps"] == [7, 14, 21]
+    assert history["failures"] == {"collision": [1, 1, 2], "large_distance": [0, 0, 0]}
+    assert history["interventions"].keys() == {"collision", "large_distance"}
+    assert history["n_states"][-1] == history["totals"]["n_states"] >= 1
+    assert history["totals"] == {
+        "episodes": 3, "steps": 21, "n_states": history["n_states"][-1], "model_version": 21,
+        "interventions": {c: v[-1] for c, v in history["interventions"].items()},
+        "failures": {"collision": 2, "large_distance": 0}}
+    # the history is part of the model: a restored copy has it and goes on from it
+    assert client.put("/models/copy", json=client.get("/model").json()).status_code == 200
+    assert client.get("/models/copy/history").json() == {**history, "name": "copy"}
+    episode(client, "/models/copy/revise")
+    assert client.get("/models/copy/history").json()["episodes"] == [1, 2, 3, 4]
+    for path, status, code in (("/models/ghost/history", 404, "unknown_model"),
+                               ("/models/BAD!/history", 422, "invalid_name")):
+        r = client.get(path)
+        assert r.status_code == status and r.json()["error"]["code"] == code, path
+        assert r.json()["error"]["field"] == "name"

@@ -1,4 +1,4 @@
-"""Models: create, list, snapshot (JSON or .npz), restore, delete, reset."""
+"""Models: create, list, snapshot (JSON or .npz), history, restore, delete, reset."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from fastapi.responses import JSONResponse
 from app.api.deps import RegistryDep, require_token
 from app.api.errors import InvalidQuery
 from app.api.routes.revise import ERRORS, NamePath
-from app.api.schemas import ErrorBody, ModelCreate, ModelList, ModelSummary
+from app.api.schemas import ErrorBody, ModelCreate, ModelHistory, ModelList, ModelSummary
 from app.core import InvalidConfig, InvalidSnapshot, ShieldConfig
 from app.service import codec
 from app.service.registry import DEFAULT_MODEL, Model
@@ -80,6 +80,14 @@ def get_model(
         if exact:
             body["exact"] = codec.to_json(shield.snapshot())
     return JSONResponse(body)
+
+
+@router.get("/models/{name}/history", response_model=ModelHistory)
+def get_history(name: NamePath, registry: RegistryDep) -> dict[str, Any]:
+    """A model's totals at the end of its episodes, thinned to span its whole life, and now."""
+    model = registry.get(name)
+    with model.lock:
+        return {"name": name, **model.shield.history_view()}
 
 
 @router.get("/model", include_in_schema=True)
