@@ -1,9 +1,13 @@
-"""Arithmetic shared by the compiled kernels: sums in numpy's own order, weighted least squares.
+"""Arithmetic shared by the compiled kernels: sums in one fixed order, elementwise exp and log,
+weighted least squares.
 
 The core's per-step path runs as numba kernels (``@njit(cache=True)``) on preallocated arrays.
-Where a kernel sums what a numpy expression of the same equation would sum, it sums in numpy's
-order (pairwise, eight accumulators), so that the compiled core gives the same numbers, bit for
-bit, as the plain numpy readings of its equations that the tests keep beside it.
+Its numbers must not depend on the CPU (docs/algorithm.md, "Determinism"): every sum is written
+out here in one explicit order, never left to a library whose order follows the vector width
+(BLAS, a SIMD reduction), and every ``exp``/``log`` of an array goes through the platform's libm
+one element at a time (:func:`exp`, :func:`log`), never through numpy's SIMD loops, whose
+results differ in the last bit between CPUs (AVX-512 has its own) and with an array's alignment.
+The tests keep a plain-Python reading of each beside it.
 """
 
 from __future__ import annotations
@@ -21,10 +25,12 @@ NEG_INF = -math.inf
 
 
 @njit(cache=True)
-def numpy_sum(x: FloatArray, n: int) -> float:
-    """``np.sum(x[:n])`` for a contiguous float64 vector, in numpy's pairwise order: blocks
-    of at most 128 summed by :func:`_block`, longer runs halved (to a multiple of 8) and the
-    halves added, walked here with a stack instead of recursion."""
+def pairwise_sum(x: FloatArray, n: int) -> float:
+    """The sum of ``x[:n]`` in one fixed pairwise order: blocks of at most 128 summed by
+    :func:`_block`, longer runs halved (to a multiple of 8) and the halves added, walked here
+    with a stack instead of recursion. This is the order numpy's source fixes for ``np.sum`` of
+    a contiguous float64 vector (as accurate, O(log n) error growth), written out so that it
+    holds whatever the library or the CPU."""
     if n <= 128:
         return _block(x, 0, n)
     starts = np.empty(64, dtype=np.int64)
@@ -84,7 +90,8 @@ def _block(x: FloatArray, start: int, n: int) -> float:
 
 @njit(cache=True)
 def logaddexp(x: float, y: float) -> float:
-    """``np.logaddexp`` as numpy computes it."""
+    """``log(exp(x) + exp(y))`` without overflow, in numpy's formula (``np.logaddexp``), on
+    libm's ``exp`` and ``log1p``."""
     if x == y:
         return x + math.log(2.0)
     d = x - y
@@ -93,6 +100,24 @@ def logaddexp(x: float, y: float) -> float:
     if d <= 0:
         return y + math.log1p(math.exp(d))
     return x + y
+
+
+@njit(cache=True)
+def exp(x: FloatArray) -> FloatArray:
+    """``exp`` of every element, one libm call each (see the module's docstring)."""
+    out = np.empty_like(x)
+    for at in np.ndindex(x.shape):
+        out[at] = math.exp(x[at])
+    return out
+
+
+@njit(cache=True)
+def log(x: FloatArray) -> FloatArray:
+    """``log`` of every element (``-inf`` at 0), one libm call each."""
+    out = np.empty_like(x)
+    for at in np.ndindex(x.shape):
+        out[at] = math.log(x[at]) if x[at] > 0.0 else (NEG_INF if x[at] == 0.0 else math.nan)
+    return out
 
 
 @njit(cache=True)

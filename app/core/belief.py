@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from app.core._kernels import numpy_sum
+from app.core._kernels import pairwise_sum
 
 FloatArray = npt.NDArray[np.float64]
 IndexArray = npt.NDArray[np.int64]
@@ -113,7 +113,7 @@ def _recognise(sq_distances: FloatArray, variances: FloatArray, k: int, index: I
         if weight > 0.0:
             index[kept], prob[kept] = index[j], weight
             kept += 1
-    total = numpy_sum(prob, kept)
+    total = pairwise_sum(prob, kept)
     for j in range(kept):
         prob[j] /= total
     return kept

@@ -31,9 +31,10 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
+from app.core import _kernels
 from app.core import _stored as stored
 from app.core._arrays import ensure_capacity
-from app.core._kernels import NEG_INF, logaddexp, numpy_sum
+from app.core._kernels import NEG_INF, logaddexp, pairwise_sum
 from app.core.belief import Belief
 from app.core.config import TransitionConfig
 from app.core.errors import InvalidSnapshot
@@ -118,24 +119,25 @@ class LazyTransitions:
         created = self._created[:, :n]
         mode = self.config.expansion
         if mode == "prior":
-            self._pad[:, :n] = np.exp(created - created[:, n - 1 : n])
+            self._pad[:, :n] = _kernels.exp(created - created[:, n - 1 : n])
             self._pad_tail[:, :n] = np.cumsum(self._pad[:, n - 1 :: -1], axis=1)[:, ::-1]
             self._pad_tail[:, n] = 0.0
             level = self._log_prior + created[:, n - 1 : n]
             pad_mass = self._pad[:, :n] * np.arange(1, n + 1) + self._pad_tail[:, 1 : n + 1]
             self._log_level[:, :n] = level
-            self._log_pad[:, :n] = level + np.log(pad_mass)
+            self._log_pad[:, :n] = level + _kernels.log(pad_mass)
         else:
             self._log_level[:, :n] = self._log_prior + created
             self._log_pad[:, :n] = self._log_level[:, :n]
             if mode == "zero_uniform":
-                self._log_pad[:, :n] += np.log(np.arange(1.0, n + 1))
+                self._log_pad[:, :n] += _kernels.log(np.arange(1.0, n + 1))
         at = np.s_[:, :n]
         self._refresh_scales(at, self._offset[at], self._row_sum[at])
 
     def _refresh_scales(self, at: Any, offset: Any, row_sum: FloatArray) -> None:
         """Row i of P^a is ``learned_scale(i) * vals(i) + pad_scale(i) * padding(i)``, for the
-        rows ``at`` whose offsets and learned sums are given."""
+        rows ``at`` whose offsets and learned sums are given (one implementation with the
+        learning kernel's, :func:`_row_scales`, so that a restored row scales as learned)."""
         self._learned_scale[at], self._pad_scale[at] = _scales(
             self._log_pad[at], self._log_level[at], offset, row_sum)
 
@@ -262,7 +264,7 @@ class LazyTransitions:
             self._nnz[a, state] = 0
             self._row_sum[a, state] = 0.0
             self._offset[a, state] = -self._log_decay[a]
-        at = np.s_[:, state]
+        at = np.s_[:, state : state + 1]
         self._refresh_scales(at, self._offset[at], self._row_sum[at])
 
     def matrix(self, action_bin: int) -> FloatArray:
@@ -289,7 +291,7 @@ class LazyTransitions:
             return np.zeros(0)
         n = self._n
         log_norm = _log_norm(self._log_pad[a, :n], self._offset[a, :n], self._row_sum[a, :n])
-        mass: FloatArray = np.exp(self._log_decay[a] + log_norm)
+        mass: FloatArray = _kernels.exp(self._log_decay[a] + log_norm)
         return mass
 
     def nbytes(self) -> int:
@@ -375,20 +377,43 @@ class LazyTransitions:
         return self
 
 
-def _log_norm(log_pad: FloatArray, offset: Any, row_sum: FloatArray) -> FloatArray:
-    """``log(F_o / D_a)`` of rows: their padding mass (+) their learned mass. A row without
+@njit(cache=True)
+def _row_log_norm(log_pad: float, offset: float, row_sum: float) -> float:
+    """``log(F_o / D_a)`` of a row: its padding mass (+) its learned mass. A row without
     learned mass (never learned, reset, or reached only by a belief state of negligible
     probability) has log 0 = -inf there, and its normaliser is the padding alone."""
-    with np.errstate(divide="ignore"):
-        log_norm: FloatArray = np.logaddexp(log_pad, offset + np.log(row_sum))
-    return log_norm
+    log_learned = math.log(row_sum) if row_sum > 0.0 else NEG_INF
+    return logaddexp(log_pad, offset + log_learned)
 
 
-def _scales(log_pad: FloatArray, log_level: FloatArray, offset: Any,
+@njit(cache=True)
+def _row_scales(log_pad: float, log_level: float, offset: float, row_sum: float
+                ) -> tuple[float, float]:
+    """A row's learned and padding scales (see :meth:`LazyTransitions._refresh_scales`)."""
+    log_norm = _row_log_norm(log_pad, offset, row_sum)
+    return math.exp(offset - log_norm), math.exp(log_level - log_norm)
+
+
+@njit(cache=True)
+def _log_norm(log_pad: FloatArray, offset: FloatArray, row_sum: FloatArray) -> FloatArray:
+    """:func:`_row_log_norm` of every row of a vector of rows."""
+    out = np.empty(log_pad.shape[0])
+    for i in range(log_pad.shape[0]):
+        out[i] = _row_log_norm(log_pad[i], offset[i], row_sum[i])
+    return out
+
+
+@njit(cache=True)
+def _scales(log_pad: FloatArray, log_level: FloatArray, offset: FloatArray,
             row_sum: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The learned and padding scales of rows (see :meth:`LazyTransitions._refresh_scales`)."""
-    log_norm = _log_norm(log_pad, offset, row_sum)
-    return np.exp(offset - log_norm), np.exp(log_level - log_norm)
+    """:func:`_row_scales` of every row (actions x states): their learned and padding
+    scales."""
+    learned, pad = np.empty_like(log_pad), np.empty_like(log_pad)
+    for a in range(log_pad.shape[0]):
+        for i in range(log_pad.shape[1]):
+            learned[a, i], pad[a, i] = _row_scales(log_pad[a, i], log_level[a, i],
+                                                   offset[a, i], row_sum[a, i])
+    return learned, pad
 
 
 def _suffix_sums(x: FloatArray) -> FloatArray:
@@ -440,17 +465,15 @@ def learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
     step = log_decay[a] + math.log1p(-lr)
     log_decay[a] = step
     base = -step  # the touched rows' new offset
-    gamma_sum = numpy_sum(gamma, gamma.shape[0])
+    gamma_sum = pairwise_sum(gamma, gamma.shape[0])
     for i in range(rows.shape[0]):
         row = rows[i]
         factor = math.exp(offset[a, row] + step)  # <= 1
         offset[a, row] = base
         learned = row_sum[a, row] * factor + lr * tau[i] * gamma_sum
         row_sum[a, row] = learned
-        log_learned = math.log(learned) if learned > 0.0 else NEG_INF
-        log_norm = logaddexp(log_pad[a, row], base + log_learned)
-        learned_scale[a, row] = math.exp(base - log_norm)
-        pad_scale[a, row] = math.exp(log_level[a, row] - log_norm)
+        learned_scale[a, row], pad_scale[a, row] = _row_scales(log_pad[a, row],
+                                                               log_level[a, row], base, learned)
         first, count = start[a, row], nnz[a, row]
         for s in range(first, first + count):
             pool_vals[s] *= factor
@@ -526,4 +549,4 @@ def _dot_rows(p: FloatArray, start: IntArray, nnz: IntArray, pool_cols: ColArray
         count = nnz[i]
         for s in range(count):
             terms[s] = pool_vals[start[i] + s] * p[pool_cols[start[i] + s]]
-        out[i] = numpy_sum(terms, count)
+        out[i] = pairwise_sum(terms, count)

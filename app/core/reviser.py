@@ -34,7 +34,7 @@ def variant_threshold(pred: FloatArray) -> float:
     # E = sum_r r X(r) = sum_i (n - i) s[i]
     s = np.sort(pred, kind="stable")
     n = s.size
-    expected_rank = float(_descending_ranks(n) @ s)
+    expected_rank = float(np.sum(_descending_ranks(n) * s))  # not BLAS: a fixed order
     index = min(max(int(math.floor(expected_rank)), 1), n)  # guard against round-off
     return float(s[n - index])
 

@@ -182,10 +182,13 @@ class DenseTransitions:
         self.P[action_bin], self.F_o[action_bin] = P, F_o
 
     def predict(self, belief: Belief, action_bin: int, transpose: bool) -> FloatArray:
-        """Eq. 5 (A1)."""
+        """Eq. 5 (A1), summed in a fixed order (rows in turn, or each row pairwise) rather than
+        by BLAS, whose order follows the CPU (docs/algorithm.md, "Determinism")."""
         p = belief.dense(self.n_states)
         P = self.P[action_bin]
-        pred: FloatArray = p @ P if transpose else P @ p
+        if transpose:
+            return np.add.reduce(p[:, None] * P, axis=0)  # type: ignore[no-any-return]
+        pred: FloatArray = (P * p).sum(axis=1)
         return pred
 
     def predict_marginal(self, belief: Belief, transpose: bool) -> FloatArray:

@@ -1,8 +1,14 @@
 """Plain numpy readings of the compiled kernels' equations, for the tests only: each kernel
-must give their numbers, bit for bit, on random inputs."""
+must give their numbers, bit for bit, on random inputs, on any CPU.
+
+So no reading here leans on arithmetic whose last bits follow the CPU: ``exp`` and ``log`` of
+an array go through Python's ``math`` (libm, as the kernels do) rather than numpy's SIMD loops,
+and a sum the kernels take pairwise is taken by :func:`pairwise_sum`, written out in Python.
+"""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -10,6 +16,38 @@ import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+
+
+def exp(x: FloatArray) -> FloatArray:
+    """``exp`` of every element through libm, as the kernels take it."""
+    return np.array([math.exp(v) for v in np.ravel(x)]).reshape(np.shape(x))
+
+
+def pairwise_sum(x: Sequence[float] | FloatArray) -> float:
+    """The sum in the kernels' fixed pairwise order (``app.core._kernels.pairwise_sum``):
+    one by one below 8, eight running sums up to 128 (then the rest one by one), and a longer
+    run halved at a multiple of 8, each half summed so and the two added."""
+    values = [float(v) for v in x]
+    n = len(values)
+    if n < 8:
+        total = -0.0
+        for v in values:
+            total += v
+        return total
+    if n <= 128:
+        sums = values[:8]
+        whole = n - n % 8
+        for i in range(8, whole, 8):
+            for lane in range(8):
+                sums[lane] += values[i + lane]
+        total = ((sums[0] + sums[1]) + (sums[2] + sums[3])) + ((sums[4] + sums[5])
+                                                               + (sums[6] + sums[7]))
+        for v in values[whole:]:
+            total += v
+        return total
+    half = n // 2
+    half -= half % 8
+    return pairwise_sum(values[:half]) + pairwise_sum(values[half:])
 
 
 def monotone(q_table: FloatArray, directions: Sequence[str]) -> FloatArray:
@@ -42,9 +80,9 @@ def recognise(sq_distances: FloatArray, variances: FloatArray,
         index = np.arange(sq_distances.shape[0])
     elif index.size > k:  # the k largest, ties to the lower index
         index = np.sort(index[np.argsort(-logits[index], kind="stable")[:k]])
-    weights = np.exp(logits[index] - logits[index].max())
+    weights = exp(logits[index] - logits[index].max())
     keep = weights > 0.0
-    return index[keep], weights[keep] / weights[keep].sum()
+    return index[keep], weights[keep] / pairwise_sum(weights[keep])
 
 
 def cluster(state: dict[str, FloatArray], z: FloatArray, epsilon: float, rho: float,
