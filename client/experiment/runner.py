@@ -100,11 +100,13 @@ def run_seeds(seed: int, runs: int) -> list[int]:
 
 
 def versions() -> dict[str, str]:
-    """The libraries and the processor a run computed with: floating point can come out
-    differently on another processor or build, and then a run does not replay. ``core``
-    names the e-FSM this process runs (:func:`app.core.compiled.version`), which tells two
-    methods apart where their configurations read the same: the shield's own when it runs
-    in-process (a service names its own at ``GET /healthz``)."""
+    """The libraries and the processor a run computed with: the e-FSM's numbers are the same
+    on every CPU (docs/algorithm.md, "Determinism"), but torch's follow the CPU, so records
+    replay bit for bit only where they were written. ``core`` names the e-FSM this process
+    runs (:func:`app.core.compiled.version`), which tells two methods apart where their
+    configurations read the same: the shield's own when it runs in-process (a service names
+    its own at ``GET /healthz``). ``cpu`` names the processor with the vector extensions torch
+    and numpy use on it."""
     import gymnasium
     import torch
 
@@ -112,7 +114,8 @@ def versions() -> dict[str, str]:
             "python": platform.python_version(),
             "numpy": np.__version__, "torch": torch.__version__,
             "gymnasium": gymnasium.__version__,
-            "cpu": f"{processor()} ({torch.backends.cpu.get_cpu_capability()})"}
+            "cpu": f"{processor()} (torch {torch.backends.cpu.get_cpu_capability()}, "
+                   f"numpy {numpy_simd()})"}
 
 
 def processor() -> str:
@@ -126,24 +129,48 @@ def processor() -> str:
     return names[0] if names else platform.processor() or platform.machine()
 
 
+def numpy_simd() -> str:
+    """The widest of numpy's dispatched SIMD levels this CPU runs (else its baseline)."""
+    from numpy._core._multiarray_umath import (  # type: ignore[import-not-found]
+        __cpu_baseline__,
+        __cpu_dispatch__,
+        __cpu_features__,
+    )
+
+    found = [name for name in __cpu_dispatch__ if __cpu_features__.get(name)]
+    return str((found or list(__cpu_baseline__) or ["none"])[-1])
+
+
 def replay_mismatch(path: Path, episode: int) -> str:
-    """Why a recorded episode came out differently: the e-FSM's sources, the libraries or
-    the processor that wrote the records, where they differ from this machine's, else a
-    change of the code."""
+    """Why a recorded episode came out differently, naming each difference between the
+    machine and build that wrote the records and this one: the e-FSM's sources, the hardware
+    (whose arithmetic torch follows), the libraries; else a change of the code."""
     written = records.read(path)[0].get("versions") or {}
     here = versions()
     if "core" not in written:  # written before the headers named the e-FSM's sources
         del here["core"]
-    changed = [f"{name} {written.get(name, 'not recorded')} there, {value} here"
-               for name, value in here.items() if written.get(name) != value]
-    if "core" in here and written["core"] != here["core"]:
-        cause = f"written with {'; '.join(changed)}: the e-FSM has changed since"
-    elif changed:
-        cause = f"written with {'; '.join(changed)}: arithmetic differs between machines and builds"
-    else:
-        cause = "written with these libraries on this processor: the code has changed since"
-    return (f"{path}: episode {episode} did not replay identically ({cause}); go on where it "
-            f"was written, or start again with another --out")
+
+    def differs(name: str) -> bool:
+        return name in here and written.get(name) != here[name]
+
+    causes = []
+    if differs("core"):
+        causes.append(f"the e-FSM has changed since (core {written['core']} there, "
+                      f"{here['core']} here)")
+    if differs("cpu"):
+        there = written.get("cpu", "a processor not recorded")
+        causes.append(f"the hardware differs (written on {there}, replayed on {here['cpu']}): "
+                      f"the controller's arithmetic follows the CPU")
+    libraries = [f"{name} {written.get(name, 'not recorded')} there, {value} here"
+                 for name, value in here.items()
+                 if name not in ("core", "cpu") and written.get(name) != value]
+    if libraries:
+        causes.append(f"the libraries differ ({'; '.join(libraries)}): their arithmetic may too")
+    if not causes:
+        causes.append("written with these libraries on this processor: the code has changed "
+                      "since")
+    return (f"{path}: episode {episode} did not replay identically ({'; '.join(causes)}); go "
+            f"on where it was written, or start again with another --out")
 
 
 class Controller(Protocol):

@@ -340,11 +340,16 @@ def test_a_run_that_does_not_replay_says_what_differs(tmp_path: Path) -> None:
 
     write({**runner.versions(), "cpu": "Another CPU (AVX512)"})
     with pytest.raises(records.RecordError, match=r"episode 2 did not replay identically "
-                       r"\(written with cpu Another CPU \(AVX512\) there, .+ here: arithmetic"):
+                       r"\(the hardware differs \(written on Another CPU \(AVX512\), replayed "
+                       r"on .+\): the controller's arithmetic follows the CPU\)"):
         runner.run_one(CONFIG, arm, 0, tmp_path)
     write({**runner.versions(), "core": "0" * 12})  # another e-FSM, the same libraries
-    with pytest.raises(records.RecordError, match=r"\(written with core 000000000000 there, "
-                       r"[0-9a-f]{12} here: the e-FSM has changed since"):
+    with pytest.raises(records.RecordError, match=r"\(the e-FSM has changed since \(core "
+                       r"000000000000 there, [0-9a-f]{12} here\)\)"):
+        runner.run_one(CONFIG, arm, 0, tmp_path)
+    write({**runner.versions(), "torch": "1.0", "cpu": "Another CPU"})  # both named
+    with pytest.raises(records.RecordError, match=r"\(the hardware differs \(written on Another "
+                       r"CPU, .+; the libraries differ \(torch 1.0 there, .+ here\)"):
         runner.run_one(CONFIG, arm, 0, tmp_path)
     for written in (runner.versions(), {name: value for name, value in runner.versions().items()
                                         if name != "core"}):  # (before headers named it)
