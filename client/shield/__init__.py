@@ -1,5 +1,6 @@
 """Reach a shield from Python: in-process, over HTTP (sync or async, single or batch), or a
-WebSocket session; all answer ``revise(observation, action, **options) -> Decision``. Or put
+WebSocket session; all answer ``revise(observation, action, **options) -> Decision``, and the
+remote ones send a step again without applying it twice with ``retry=Retry()``. Or put
 it in front of a Gymnasium environment: :class:`ShieldWrapper`, or of a vectorised one with one
 model for every copy: :class:`ShieldVectorWrapper`."""
 
@@ -13,14 +14,22 @@ from client.shield.remote import (
     ShieldSession,
     ShieldUnavailable,
 )
-from client.shield.spaces import SpaceMismatch, check_config, config_for
+from client.shield.retry import Retry, new_key
+from client.shield.spaces import (
+    SpaceMismatch,
+    check_config,
+    config_for,
+    sample_observations,
+)
 from client.shield.vector import ShieldVectorWrapper
-from client.shield.wrapper import ShieldWrapper
+from client.shield.wrapper import NoFailureReported, ShieldWrapper
 
 __all__ = [
     "AsyncShieldClient",
     "BatchShield",
     "LocalShield",
+    "Retry",
+    "NoFailureReported",
     "StepShield",
     "ShieldAPIError",
     "ShieldClient",
@@ -31,4 +40,6 @@ __all__ = [
     "SpaceMismatch",
     "check_config",
     "config_for",
+    "new_key",
+    "sample_observations",
 ]

@@ -14,10 +14,12 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import numpy.typing as npt
 
 from app.core import ActionSpec, Bound, Criterion, ObservationSpec, ShieldConfig
 
 DEFAULT_BINS = 20
+SAMPLE_MARGIN = 0.1  # a sample's range widens by this share of its span on each side
 AnyEnv = gym.Env[Any, Any] | gym.vector.VectorEnv[Any, Any, Any]
 
 
@@ -67,22 +69,30 @@ def own_config(env: AnyEnv) -> ShieldConfig | None:
 
 def config_for(env: AnyEnv, criteria: Mapping[str, str | tuple[str, Bound]] | None = None, *,
                bins: int = DEFAULT_BINS, low: Sequence[float] | None = None,
-               high: Sequence[float] | None = None, base: ShieldConfig | None = None
-               ) -> ShieldConfig:
+               high: Sequence[float] | None = None, observations: npt.ArrayLike | None = None,
+               base: ShieldConfig | None = None) -> ShieldConfig:
     """The shield configuration for ``env`` (or for each copy of a vectorised ``env``).
 
     An environment that knows its shield (a ``shield_config()`` method on the unwrapped
-    environment, as ``CarFollowing-v0`` has) gives its own. Otherwise the observation's Box
-    bounds (or ``low``/``high`` where they are infinite) normalise the observation, the action
-    range is cut into ``bins`` bins, and ``criteria`` names each failure with the direction
-    of the action that moves away from it: ``{"crash": "decrease"}`` (slower is safer), and,
-    where a failure is one observation number crossing a value, where it fails:
+    environment, as ``CarFollowing-v0`` has) gives its own. Otherwise the action range is cut
+    into ``bins`` bins, and ``criteria`` names each failure with the direction of the action
+    that moves away from it: ``{"crash": "decrease"}`` (slower is safer), and, where a failure
+    is one observation number crossing a value, where it fails:
     ``{"crash": ("decrease", Bound("x0", below=0.0))}`` (the observation's numbers are named
     ``x0``, ``x1``, ...). Everything else is ``base`` (default: the shield's defaults).
+
+    The shield scales every observation number by the range it normally takes, so that no
+    number dominates the clustering's distances. Each number's range is, first found first:
+    ``low``/``high`` (one bound per number); the range of ``observations`` (a sample of what
+    the shield will see, one row per step, e.g. from :func:`sample_observations`) widened by
+    :data:`SAMPLE_MARGIN` of its span on each side; the observation space's bounds. A number
+    whose range is still infinite (an observation space declared ``Box(-inf, inf)``) is
+    refused with :class:`SpaceMismatch` on ``observation_space``. Numbers outside the range
+    are not clipped: the range only sets the scale.
     """
     action_space, space = spaces(env)
     action = one_dimensional(action_space)
-    if criteria is None and low is None and high is None:
+    if criteria is None and low is None and high is None and observations is None:
         own = own_config(env)
         if own is not None:
             return own
@@ -96,15 +106,27 @@ def config_for(env: AnyEnv, criteria: Mapping[str, str | tuple[str, Bound]] | No
     if not isinstance(space, gym.spaces.Box):
         raise SpaceMismatch(f"the shield observes a Box, not {space}", "observation_space")
     size = int(np.prod(space.shape))
-    lows = np.asarray(space.low, np.float64).reshape(-1) if low is None else np.asarray(low)
-    highs = np.asarray(space.high, np.float64).reshape(-1) if high is None else np.asarray(high)
-    if lows.shape != (size,) or highs.shape != (size,):
-        raise SpaceMismatch(f"low and high need one bound per observation number ({size})",
-                            "low")
+    lows = np.asarray(space.low, np.float64).reshape(-1)
+    highs = np.asarray(space.high, np.float64).reshape(-1)
+    if observations is not None:
+        lows, highs = sample_range(observations, size)
+    for name, given in (("low", low), ("high", high)):
+        if given is not None and np.shape(given) != (size,):
+            raise SpaceMismatch(f"{name} needs one bound per observation number ({size}), "
+                                f"not {np.shape(given)}", name)
+    lows = lows if low is None else np.asarray(low, np.float64)
+    highs = highs if high is None else np.asarray(high, np.float64)
     unbounded = [i for i in range(size) if not (np.isfinite(lows[i]) and np.isfinite(highs[i]))]
     if unbounded:
-        raise SpaceMismatch(f"observation dimensions {unbounded} are unbounded; give low= and "
-                            "high= with the range they normally take", "observation_space")
+        which = (f"all {size} of its numbers" if len(unbounded) == size else
+                 f"numbers {unbounded} of its {size} (flattened)")
+        raise SpaceMismatch(
+            f"the observation space {space} leaves {which} unbounded, and the shield scales "
+            "every number by the range it normally takes: give it, config_for(env, criteria, "
+            "low=[...], high=[...]) with one bound per number, or let a sample of "
+            "observations give it, config_for(env, criteria, "
+            "observations=sample_observations(env)), then ShieldWrapper(env, config=...)",
+            "observation_space")
     a_low, a_high = float(action.low.reshape(-1)[0]), float(action.high.reshape(-1)[0])
     base = base or ShieldConfig()
     return dataclasses.replace(
@@ -116,6 +138,51 @@ def config_for(env: AnyEnv, criteria: Mapping[str, str | tuple[str, Bound]] | No
         criteria=tuple(Criterion(name, *((how,) if isinstance(how, str) else how))
                        for name, how in criteria.items()),
     )
+
+
+def sample_range(observations: npt.ArrayLike, size: int
+                 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Each observation number's range in a sample (rows of ``size`` numbers, or of any shape
+    holding ``size``), widened by :data:`SAMPLE_MARGIN` of its span on each side; a number
+    that never varied gets a span of its magnitude (at least 1)."""
+    try:
+        sample = np.asarray(observations, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise SpaceMismatch(f"a sample of observations is an array of numbers ({error})",
+                            "observations") from error
+    if sample.ndim == 0 or sample.size == 0 or sample.size % size:
+        raise SpaceMismatch(f"a sample of observations holds rows of the observation's {size} "
+                            f"numbers; this one has shape {sample.shape}", "observations")
+    sample = sample.reshape(-1, size)
+    if not np.isfinite(sample).all():
+        raise SpaceMismatch("the sample of observations holds numbers that are not finite",
+                            "observations")
+    lows, highs = sample.min(axis=0), sample.max(axis=0)
+    span = highs - lows
+    span = np.where(span > 0, span, np.maximum(np.abs(lows), 1.0))
+    return lows - SAMPLE_MARGIN * span, highs + SAMPLE_MARGIN * span
+
+
+def sample_observations(env: gym.Env[Any, Any], steps: int = 1000, seed: int = 0,
+                        observation_key: str = "efsm_observation"
+                        ) -> npt.NDArray[np.float64]:
+    """What the shield would see over ``steps`` steps of random actions (the action space's
+    own samples, seeded by ``seed``), one row per step: ``info[observation_key]`` where the
+    environment gives one, else the observation. For :func:`config_for`'s ``observations``
+    where the observation space does not bound them; a sample from your own controller covers
+    the range it will meet better."""
+    if steps < 1:
+        raise ValueError("steps must be >= 1")
+    env.action_space.seed(seed)
+    observation, info = env.reset(seed=seed)
+    rows = [info.get(observation_key, observation)]
+    while len(rows) < steps:
+        observation, _, terminated, truncated, info = env.step(env.action_space.sample())
+        rows.append(info.get(observation_key, observation))
+        if (terminated or truncated) and len(rows) < steps:
+            observation, info = env.reset()
+            rows.append(info.get(observation_key, observation))
+    return np.array([np.asarray(row, np.float64).reshape(-1) for row in rows])
 
 
 def check_config(config: ShieldConfig, env: AnyEnv,

@@ -27,7 +27,15 @@ from gymnasium.vector import AutoresetMode
 from app.core import ShieldConfig
 from client.shield.base import StepShield
 from client.shield.spaces import SpaceMismatch, check_observation, one_dimensional
-from client.shield.wrapper import Failure, bind, default_stream, reseeded
+from client.shield.wrapper import (
+    Failure,
+    FailureWatch,
+    bind,
+    check_failure,
+    default_stream,
+    reported,
+    reseeded,
+)
 
 
 class ShieldVectorWrapper(gym.vector.VectorWrapper):
@@ -38,7 +46,9 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
     ``criteria``, seeded by the first ``reset(seed=...)``), ``failure`` (called per copy
     with that copy's observation, reward, flags and info) or ``info[event_key]``,
     ``observation_key``, ``warmup_steps`` (vector steps in which the shield only reports) and
-    ``shadow``.
+    ``shadow``; it warns as :class:`ShieldWrapper` does when the copies' episodes terminate
+    and no failure is ever reported (:class:`~client.shield.wrapper.FailureWatch`, over all
+    copies).
     """
 
     def __init__(self, env: gym.vector.VectorEnv[Any, Any, Any],
@@ -49,6 +59,7 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
                  shadow: bool = False) -> None:
         super().__init__(env)
         one_dimensional(env.single_action_space)
+        check_failure(failure)
         mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
         if AutoresetMode(mode) != AutoresetMode.NEXT_STEP:
             raise SpaceMismatch(f"the shield follows copies that reset themselves on the next "
@@ -59,6 +70,7 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
                                         warmup_steps)
         self.failure = failure
         self.event_key = event_key
+        self.watch = FailureWatch(failure, event_key, self.config)
         self.observation_key = observation_key
         prefix = stream_prefix if stream_prefix is not None else default_stream()
         self.streams = [f"{prefix}-{i}" for i in range(env.num_envs)]
@@ -122,9 +134,9 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
                 self._z[i] = self._observe(observations, infos, i)
                 continue
             info = _one(infos, i)
-            event = (self.failure(observations[i], float(rewards[i]), bool(terminated[i]),
-                                  bool(truncated[i]), info)
-                     if self.failure is not None else info.get(self.event_key))
+            event = reported(self.failure, self.event_key, observations[i], float(rewards[i]),
+                             bool(terminated[i]), bool(truncated[i]), info)
+            self.watch.step(event, bool(terminated[i]), info)
             z = self._observe(observations, infos, i)
             if terminated[i] or truncated[i]:
                 done[i] = self._end(i, z, event)

@@ -11,6 +11,10 @@ previous step ended in, and gives the environment the shield's action. Failures 
 ``failure(observation, reward, terminated, truncated, info)`` or from ``info[event_key]``, at
 any step: a failure that does not end the episode is learned all the same.
 
+A wrapper that sees :data:`SILENT_EPISODES` episodes terminate without one failure reported
+warns once (:class:`NoFailureReported`): the environment most likely reports its failures
+under another key (highway-env's ``info["crashed"]``), and the shield would learn nothing.
+
 ``info`` carries, JSON-able: ``shield`` (the decision record), ``applied_action`` (what the
 environment was given, in its action's shape), ``proposed_action``, ``shield_observation``, and
 at the end of an episode ``shield_done``. Learning controllers should learn from the applied
@@ -24,8 +28,10 @@ shield learns. ``set_evaluation(True)`` stops learning (the model answers as it 
 
 from __future__ import annotations
 
+import inspect
 import itertools
 import os
+import warnings
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -45,6 +51,90 @@ from client.shield.spaces import (
 
 Failure = Callable[[Any, float, bool, bool, dict[str, Any]], str | None]
 _copies = itertools.count()
+SILENT_EPISODES = 3  # terminated episodes without a failure reported before the warning
+
+
+class NoFailureReported(UserWarning):
+    """Episodes terminate and not one failure has reached the shield: it learns nothing."""
+
+
+class FailureWatch:
+    """Warns once, with :class:`NoFailureReported`, when :data:`SILENT_EPISODES` episodes
+    have terminated (truncations do not count) and no failure was reported at any step: the
+    shield learns which actions lead to failures, and here it would learn nothing, silently.
+    An environment whose episodes end well (a goal reached) warns too; the message says how
+    to silence it."""
+
+    def __init__(self, failure: Failure | None, event_key: str,
+                 config: ShieldConfig | None) -> None:
+        self.failure = failure
+        self.event_key = event_key
+        self.names = [c.name for c in config.criteria] if config is not None else []
+        self.terminated = 0
+        self.reported = False
+        self.key_seen = False  # info[event_key] was present at some step
+        self.warned = False
+
+    def step(self, event: str | None, terminated: bool, info: Mapping[str, Any]) -> None:
+        """Count one step's outcome; warn if it makes the failures' silence suspicious."""
+        self.key_seen = self.key_seen or self.event_key in info
+        self.reported = self.reported or bool(event)
+        self.terminated += terminated
+        if self.warned or self.reported or self.terminated < SILENT_EPISODES:
+            return
+        self.warned = True
+        warnings.warn(self.message(), NoFailureReported, stacklevel=3)
+
+    def message(self) -> str:
+        """What the warning says: what was seen and how to pass ``failure=``."""
+        name = self.names[0] if self.names else "crash"
+        if self.failure is None:
+            source = (f"It reads failures from info[{self.event_key!r}], which this environment "
+                      f"{'has always left empty' if self.key_seen else 'never sets'}. ")
+        else:
+            source = "Its failure= predicate returned None at every step. "
+        criteria = f" (this shield's criteria: {', '.join(self.names)})" if self.names else ""
+        return (
+            f"{self.terminated} episodes terminated and the shield was told of no failure in "
+            f"any of them, so it learns nothing to avoid. {source}If the environment reports "
+            "its failures elsewhere (highway-env: info['crashed']), pass failure=, called "
+            "after every step as failure(observation, reward, terminated, truncated, info) "
+            f"and returning the name of the criterion that failed{criteria}, or None: "
+            f"ShieldWrapper(env, failure=lambda observation, reward, terminated, truncated, "
+            f"info: {name!r} if info.get('crashed') else None, ...). If these episodes ended "
+            "well, ignore this: warnings.filterwarnings('ignore', "
+            "category=client.shield.NoFailureReported).")
+
+
+def check_failure(failure: Failure | None) -> None:
+    """Refuse a ``failure`` predicate that cannot take the five arguments it is called with."""
+    if failure is None:
+        return
+    try:
+        signature = inspect.signature(failure)
+    except (TypeError, ValueError):  # a callable whose signature Python cannot read
+        return
+    try:
+        signature.bind(None, 0.0, False, False, {})
+    except TypeError as error:
+        raise TypeError(
+            f"failure= is called after every step as failure(observation, reward, terminated, "
+            f"truncated, info) and returns the failed criterion's name or None; "
+            f"{getattr(failure, '__name__', failure)}{signature} cannot take these five "
+            f"arguments ({error})") from error
+
+
+def reported(failure: Failure | None, event_key: str, observation: Any, reward: float,
+             terminated: bool, truncated: bool, info: dict[str, Any]) -> str | None:
+    """The failure a step ended in: ``failure(...)``'s answer, else ``info[event_key]``."""
+    if failure is None:
+        event: Any = info.get(event_key)
+        return None if event is None else str(event)
+    event = failure(observation, reward, terminated, truncated, info)
+    if event is not None and not isinstance(event, str):
+        raise TypeError(f"failure= returns the name of the criterion that failed (a str) or "
+                        f"None, not {event!r}")
+    return event
 
 
 def bind(env: AnyEnv, shield: StepShield | None, config: ShieldConfig | None,
@@ -84,6 +174,10 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
     ``criteria``) and seeded by the first ``reset(seed=...)``. A shield passed in is the
     caller's to close; one the wrapper made, the wrapper closes.
 
+    Failures come from ``failure(observation, reward, terminated, truncated, info)`` (the
+    name of the criterion that failed, or None) where given, else from ``info[event_key]``;
+    see :class:`FailureWatch` for the warning when none ever comes.
+
     ``warmup_steps``: the shield learns and reports but does not change the action for this
     many steps of this wrapper. ``shadow``: never change it.
     """
@@ -96,11 +190,13 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
                  warmup_steps: int = 0, shadow: bool = False) -> None:
         super().__init__(env)
         one_dimensional(env.action_space)
+        check_failure(failure)
         self._owned = shield is None
         self.config, self.shield = bind(env, shield, config, criteria, observation_key,
                                         warmup_steps)
         self.failure = failure
         self.event_key = event_key
+        self.watch = FailureWatch(failure, event_key, self.config)
         self.observation_key = observation_key
         self.stream = stream if stream is not None else default_stream()
         self.warmup_steps = warmup_steps
@@ -145,8 +241,9 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
         space = self.env.action_space
         applied = np.asarray(decision.action, dtype=space.dtype).reshape(space.shape)
         observation, reward, terminated, truncated, info = self.env.step(applied)
-        event = (self.failure(observation, float(reward), terminated, truncated, info)
-                 if self.failure is not None else info.get(self.event_key))
+        event = reported(self.failure, self.event_key, observation, float(reward), terminated,
+                         truncated, info)
+        self.watch.step(event, terminated, info)
         self._z = self._observe(observation, info)
         info["shield"] = decision.to_dict()
         info["applied_action"] = applied

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import warnings
 from typing import Any
 
 import gymnasium as gym
@@ -13,7 +14,17 @@ import numpy as np
 import pytest
 
 from app.core import Bound, InvalidConfig, ReviserConfig, ShieldConfig
-from client.shield import LocalShield, ShieldWrapper, SpaceMismatch, config_for
+from client.shield import (
+    LocalShield,
+    NoFailureReported,
+    ShieldVectorWrapper,
+    ShieldWrapper,
+    SpaceMismatch,
+    config_for,
+    sample_observations,
+)
+from client.shield.spaces import SAMPLE_MARGIN
+from client.shield.wrapper import SILENT_EPISODES
 from client.sim.car_following import CarFollowingEnv
 from client.sim.lead import synthetic
 
@@ -28,12 +39,17 @@ def ledge_config(criteria: dict[str, str] = EDGE) -> ShieldConfig:
 
 class Ledge(gym.Env[np.ndarray, np.ndarray]):
     """A point pushed along [0, 1] by its action; beyond 0.9 it falls off ("edge", the episode
-    ends); ``bumps`` also reports a "bump" above 0.7 without ending the episode."""
+    ends); ``bumps`` also reports a "bump" above 0.7 without ending the episode. ``key`` is
+    where ``info`` tells the failure (highway-env says ``"crashed"``); ``bounded=False``
+    declares the observation space ``Box(-inf, inf)``, as highway-env does."""
 
-    def __init__(self, bumps: bool = False, dims: int = 1) -> None:
-        self.observation_space = gym.spaces.Box(0.0, 1.0, shape=(1,), dtype=np.float64)
+    def __init__(self, bumps: bool = False, dims: int = 1, key: str = "event",
+                 bounded: bool = True) -> None:
+        low, high = (0.0, 1.0) if bounded else (-np.inf, np.inf)
+        self.observation_space = gym.spaces.Box(low, high, shape=(1,), dtype=np.float64)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(dims,), dtype=np.float32)
         self.bumps = bumps
+        self.key = key
         self.x, self.t = 0.5, 0
 
     def reset(self, *, seed: int | None = None,
@@ -48,7 +64,7 @@ class Ledge(gym.Env[np.ndarray, np.ndarray]):
         self.t += 1
         fell = self.x > 0.9
         event = "edge" if fell else ("bump" if self.bumps and self.x > 0.7 else None)
-        return np.array([self.x]), float(self.x), fell, self.t >= 30, {"event": event}
+        return np.array([self.x]), float(self.x), fell, self.t >= 30, {self.key: event}
 
 
 def pushing(episodes: int, env: gym.Env[Any, Any], seed: int = 0) -> list[dict[str, Any]]:
@@ -101,7 +117,7 @@ def test_config_for_reads_the_spaces_and_asks_for_what_they_cannot_say() -> None
     assert refused.value.field == "criteria.0.bound.observation"
     unbounded = gym.make("MountainCarContinuous-v0")
     unbounded.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(2,))
-    with pytest.raises(SpaceMismatch, match=r"dimensions \[0, 1\] are unbounded"):
+    with pytest.raises(SpaceMismatch, match="leaves all 2 of its numbers unbounded"):
         config_for(unbounded, EDGE)
     assert config_for(unbounded, EDGE, low=[-1.2, -0.07], high=[0.6, 0.07]).observation.high \
         == (0.6, 0.07)
@@ -258,3 +274,136 @@ def test_sb3_learns_from_the_applied_action() -> None:
     assert callback.revised > 0
     stored = model.replay_buffer.actions[:300, 0, 0]  # type: ignore[union-attr]
     np.testing.assert_allclose(stored, np.array(callback.applied), atol=1e-6)  # [-1, 1] here
+
+
+def crashed(observation: Any, reward: float, terminated: bool, truncated: bool,
+            info: dict[str, Any]) -> str | None:
+    """Ledge's failure where it reports it as highway-env does, under ``info["crashed"]``."""
+    return "edge" if info["crashed"] else None
+
+
+def silence_warnings(env: gym.Env[Any, Any], episodes: int) -> list[warnings.WarningMessage]:
+    """The :class:`NoFailureReported` warnings of ``episodes`` episodes pushed into ``env``,
+    each shown (no filter hides a repeat)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        pushing(episodes, env)
+    return [w for w in caught if issubclass(w.category, NoFailureReported)]
+
+
+def test_failures_reported_under_another_key_warn_once_and_say_how_to_pass_them() -> None:
+    env = ShieldWrapper(Ledge(key="crashed"), config=ledge_config())
+    caught = silence_warnings(env, 60)
+    assert len(caught) == 1  # once, however many silent episodes follow
+    message = str(caught[0].message)
+    assert f"{SILENT_EPISODES} episodes terminated" in message
+    assert "info['event'], which this environment never sets" in message
+    assert "failure(observation, reward, terminated, truncated, info)" in message
+    assert "criteria: edge" in message
+    assert caught[0].filename == __file__  # it points at the caller's step()
+    assert env.shield.shield.local_risk.failures.sum() == 0  # type: ignore[attr-defined]
+    # the advice works: the same environment with failure= learns and does not warn
+    told = ShieldWrapper(Ledge(key="crashed"), config=ledge_config(), failure=crashed)
+    assert silence_warnings(told, 60) == []
+    assert told.shield.shield.local_risk.failures.sum() > 0  # type: ignore[attr-defined]
+
+
+def test_no_warning_while_failures_come_or_episodes_end_otherwise() -> None:
+    assert silence_warnings(ShieldWrapper(Ledge(), config=ledge_config()), 60) == []
+    timid = ShieldWrapper(Ledge(key="crashed"), config=ledge_config())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for episode in range(10):  # never reaches the ledge: every episode is truncated
+            timid.reset(seed=episode)
+            while not any(timid.step(np.array([-1.0], np.float32))[2:4]):
+                pass
+    assert not [w for w in caught if issubclass(w.category, NoFailureReported)]
+    assert timid.watch.terminated == 0
+    counting = ShieldWrapper(Ledge(key="crashed"), config=ledge_config())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        counting.reset(seed=0)
+        while counting.watch.terminated < SILENT_EPISODES - 1:
+            if any(counting.step(np.array([1.0], np.float32))[2:4]):
+                counting.reset()
+    assert not [w for w in caught if issubclass(w.category, NoFailureReported)]  # one short
+
+
+def test_a_predicate_that_never_fires_warns_about_itself() -> None:
+    def never(observation: Any, reward: float, terminated: bool, truncated: bool,
+              info: dict[str, Any]) -> str | None:
+        return None
+
+    caught = silence_warnings(ShieldWrapper(Ledge(), config=ledge_config(), failure=never), 20)
+    assert len(caught) == 1 and "failure= predicate returned None at every step" \
+        in str(caught[0].message)
+
+
+def test_a_predicate_of_the_wrong_shape_is_refused_with_the_five_arguments() -> None:
+    with pytest.raises(TypeError, match=r"failure\(observation, reward, terminated, "
+                                        r"truncated, info\)"):
+        ShieldWrapper(Ledge(), criteria=EDGE, failure=lambda info: info.get("crashed"))
+    yes_no = ShieldWrapper(Ledge(), criteria=EDGE,
+                           failure=lambda o, r, te, tr, info: te)  # type: ignore[arg-type,return-value]
+    yes_no.reset(seed=0)
+    with pytest.raises(TypeError, match="the name of the criterion that failed .* not False"):
+        yes_no.step(np.array([0.0], np.float32))
+
+
+def test_the_vector_wrapper_warns_as_the_wrapper_does() -> None:
+    gym.register("LedgeCrashedForTest-v0", entry_point=Ledge, kwargs={"key": "crashed"})
+    envs = ShieldVectorWrapper(gym.make_vec("LedgeCrashedForTest-v0", num_envs=2,
+                                            vectorization_mode="sync"), config=ledge_config())
+    envs.reset(seed=0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(200):  # full push: each copy falls off every few steps
+            envs.step(np.ones((2, 1), np.float32))
+    assert envs.watch.terminated > SILENT_EPISODES
+    assert len([w for w in caught if issubclass(w.category, NoFailureReported)]) == 1
+    envs.close()
+
+
+def test_an_unbounded_observation_space_is_refused_and_names_both_ways_out() -> None:
+    with pytest.raises(SpaceMismatch) as error:
+        ShieldWrapper(Ledge(bounded=False), criteria=EDGE)
+    assert error.value.field == "observation_space"
+    assert "Box(-inf, inf, (1,), float64)" in str(error.value)
+    assert "low=[...], high=[...]" in str(error.value)
+    assert "observations=sample_observations(env)" in str(error.value)
+    given = config_for(Ledge(bounded=False), EDGE, low=[0.0], high=[1.0])
+    assert (given.observation.low, given.observation.high) == ((0.0,), (1.0,))
+    with pytest.raises(SpaceMismatch, match=r"one bound per observation number \(1\)") as size:
+        config_for(Ledge(bounded=False), EDGE, low=[0.0, 0.0], high=[1.0])
+    assert size.value.field == "low"
+
+
+def test_a_sample_of_observations_gives_the_range_widened_by_the_margin() -> None:
+    sample = np.array([[0.2, 5.0], [0.6, 5.0], [0.4, 5.0]])
+    env = gym.make("MountainCarContinuous-v0")
+    env.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(2,))
+    config = config_for(env, EDGE, observations=sample)
+    assert config.observation.low == pytest.approx((0.2 - SAMPLE_MARGIN * 0.4, 5.0 - 5.0 * 0.1))
+    assert config.observation.high == pytest.approx((0.6 + SAMPLE_MARGIN * 0.4, 5.0 + 5.0 * 0.1))
+    # low=/high= win over the sample, per bound
+    mixed = config_for(env, EDGE, observations=sample, high=[1.0, 9.0])
+    assert mixed.observation.high == (1.0, 9.0)
+    assert mixed.observation.low == config.observation.low
+    for bad, message in ((np.zeros((3, 3)), r"rows of the observation's 2 numbers"),
+                         ([[0.0, np.nan]], "not finite"), ([], "shape \\(0,\\)"),
+                         ([["a", "b"]], "an array of numbers")):
+        with pytest.raises(SpaceMismatch, match=message) as error:
+            config_for(env, EDGE, observations=bad)
+        assert error.value.field == "observations"
+
+
+def test_sample_observations_reads_what_the_shield_sees() -> None:
+    sample = sample_observations(Ledge(bounded=False), steps=120, seed=3)
+    assert sample.shape == (120, 1) and ((0.0 <= sample) & (sample <= 1.0)).all()
+    np.testing.assert_array_equal(sample, sample_observations(Ledge(bounded=False), 120, 3))
+    assert not np.array_equal(sample, sample_observations(Ledge(bounded=False), 120, 4))
+    cars = sample_observations(CarFollowingEnv(lead=synthetic(0, count=2)), steps=50)
+    assert cars.shape == (50, 3)  # info["efsm_observation"], not the observation
+    env = ShieldWrapper(Ledge(bounded=False),
+                        config=config_for(Ledge(bounded=False), EDGE, observations=sample))
+    pushing(3, env)  # the derived configuration guards the environment
