@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bench.worlds.__main__ import world_named
-from bench.worlds.harness import compare, run
+from bench.worlds.harness import compare, run, summary_line
 
 WORLDS = ["braking_lead", "pendulum", "wall", "lane"]
 
@@ -96,3 +96,32 @@ def test_an_unknown_world_is_refused_with_the_names_there_are() -> None:
         world_named("tuning_nowhere")
     with pytest.raises(SystemExit, match="braking_lead"):
         world_named("nowhere")
+
+
+def test_a_run_counts_the_warm_up_apart_and_what_the_shield_took_over() -> None:
+    world = importlib.import_module("bench.worlds.braking_lead").WORLD
+    whole = run(world, seed=7, episodes=12, warmup=0, config=None)
+    split = run(world, seed=7, episodes=12, warmup=5, config=None)
+    assert split["early_total"] + split["total"] == whole["total"] > 0
+    assert split["revised"] == 0 and split["revised_share"] == 0.0 and split["task"] is None
+    shielded = run(world, seed=7, episodes=12, warmup=2, config=world.config)
+    assert 0 < shielded["revised"] <= shielded["steps"]
+    assert shielded["revised_share"] == shielded["revised"] / shielded["steps"]
+    assert shielded["mean_revision"] > 0.0
+
+
+def test_compare_names_the_worst_seed_and_the_seeds_a_shield_harmed() -> None:
+    world = importlib.import_module("bench.worlds.braking_lead").WORLD
+    result = compare(world, [7, 8], episodes=8, warmup=2)
+    ratios = [r["ratio"] for r in result["runs"]]
+    assert result["worst_seed_ratio"] == max(r for r in ratios if r is not None)
+    assert result["harmed_seeds"] == [r["seed"] for r in result["runs"]
+                                      if r["shielded"]["total"] > r["alone"]["total"]]
+    assert "worst seed" in summary_line(result) and "revised" in summary_line(result)
+
+
+def test_a_world_that_reports_a_task_figure_has_it_averaged_per_step() -> None:
+    from bench.heldout import world as heldout  # alone only: these worlds are held out
+
+    result = run(heldout("pile"), seed=2000, episodes=2, warmup=0, config=None)
+    assert result["task"] is not None and result["task"] >= 0.0
