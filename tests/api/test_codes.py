@@ -6,6 +6,9 @@ from collections.abc import Iterator
 
 from fastapi.testclient import TestClient
 
+from app.main import create_app
+from app.settings import Settings
+
 JSON = {"content-type": "application/json"}
 
 
@@ -47,3 +50,35 @@ def test_the_openapi_schema_names_the_codes_a_client_can_meet(client: TestClient
                  if p["name"] == "index")
     assert index["schema"]["minimum"] == 0
     assert client.get("/models/default/states/-1").json()["error"]["code"] == "invalid_path"
+
+
+def test_an_unknown_query_parameter_is_refused_as_an_unknown_body_field_is(
+        client: TestClient) -> None:
+    step = {"observation": [10.0, 20.0, 10.0], "action": 0.1}
+    r = client.post("/revise", params={"learn": "false"}, json=step)  # a body field, misplaced
+    assert (r.status_code, r.json()["error"]["code"], r.json()["error"]["field"]) == (
+        422, "invalid_query", "learn")
+    r = client.get("/models/default", params={"tmp": "none"})  # tpm, misspelt
+    assert (r.status_code, r.json()["error"]["code"], r.json()["error"]["field"]) == (
+        422, "invalid_query", "tmp")
+    assert "tpm" in r.json()["error"]["message"]  # what the route does take
+    assert client.get("/model", params={"tpm": "none"}).json()["steps"] == 0  # nothing applied
+    with client.websocket_connect("/ws?colour=red") as ws:
+        assert ws.receive_json()["error"] | {"message": ""} == {
+            "code": "invalid_query", "message": "", "field": "colour"}
+    with client.websocket_connect("/ws?token=") as ws:  # a stream may carry its token there
+        ws.send_json(step)
+        assert ws.receive_json()["model_version"] == 1
+
+
+def test_an_unknown_query_parameter_without_the_token_is_unauthorized() -> None:
+    with TestClient(create_app(Settings(token="secret"))) as client:
+        r = client.get("/models/default", params={"tmp": "none"})
+        assert (r.status_code, r.json()["error"]["code"]) == (401, "unauthorized")
+
+
+def test_a_method_a_route_does_not_take_is_405_with_the_error_body(client: TestClient) -> None:
+    r = client.delete("/healthz")
+    assert r.status_code == 405
+    assert r.json()["error"] | {"message": ""} == {"code": "method_not_allowed", "message": "",
+                                                    "field": None}

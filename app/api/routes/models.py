@@ -6,17 +6,19 @@ import json
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, Header, Query, Request, Response, status
+from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 
-from app.api.deps import RegistryDep, require_token
-from app.api.errors import InvalidQuery
+from app.api.deps import KnownQueryRoute, RegistryDep, require_token
+from app.api.errors import InvalidQuery, TooLarge
 from app.api.routes.revise import ERRORS, NamePath
 from app.api.schemas import ErrorBody, ModelCreate, ModelHistory, ModelList, ModelSummary
 from app.core import InvalidConfig, InvalidSnapshot, ShieldConfig
 from app.service import codec
-from app.service.registry import DEFAULT_MODEL, Model
+from app.service.registry import DEFAULT_MODEL, Model, ModelRegistry
 
-router = APIRouter(tags=["models"], dependencies=[Depends(require_token)], responses=ERRORS)
+router = APIRouter(tags=["models"], dependencies=[Depends(require_token)], responses=ERRORS,
+                   route_class=KnownQueryRoute)
 NPZ = "application/x-npz"
 
 
@@ -110,19 +112,34 @@ def get_default_model(
                 NPZ: {"schema": {"type": "string", "format": "binary"}}}}})
 async def put_model(name: NamePath, request: Request, registry: RegistryDep) -> dict[str, Any]:
     """Create or replace a model from a snapshot (the JSON of GET, or its .npz)."""
-    blob = await request.body()
-    limit = request.app.state.settings.max_snapshot_bytes
-    if NPZ in request.headers.get("content-type", ""):
-        snapshot = codec.from_npz(blob, limit)
-    else:
-        try:
-            document = json.loads(blob)
-        except (ValueError, RecursionError) as error:
-            raise InvalidSnapshot(f"unreadable snapshot: {error}", field="body") from error
-        if not isinstance(document, dict) or "exact" not in document:
-            raise InvalidSnapshot("the body needs the 'exact' state of GET", field="exact")
-        snapshot = codec.from_json(document["exact"], limit)
-    return summary(registry.restore(name, snapshot))
+    async with request.app.state.restores:  # memory: at most this many read at once
+        blob = await request.body()
+        npz = NPZ in request.headers.get("content-type", "")
+        limit = request.app.state.settings.max_snapshot_bytes
+        model = await run_in_threadpool(restore, registry, name, blob, npz, limit)
+    return summary(model)
+
+
+JSON_INFLATION = 8  # a JSON snapshot's Python objects take up to this many times its bytes
+
+
+def restore(registry: ModelRegistry, name: str, blob: bytes, npz: bool, limit: int) -> Model:
+    """Read a snapshot (``limit``: the most its arrays may take) and restore it: a JSON one
+    of at most ``limit / JSON_INFLATION`` bytes, whose parsed objects then take no more than
+    the arrays of an .npz may."""
+    if npz:
+        return registry.restore(name, codec.from_npz(blob, limit))
+    if len(blob) > limit // JSON_INFLATION:
+        raise TooLarge(f"a JSON snapshot over {limit // JSON_INFLATION} bytes (parsed, it "
+                       f"would take about {JSON_INFLATION} times as much): send its .npz",
+                       field="body")
+    try:
+        document = json.loads(blob)
+    except (ValueError, RecursionError) as error:
+        raise InvalidSnapshot(f"unreadable snapshot: {error}", field="body") from error
+    if not isinstance(document, dict) or "exact" not in document:
+        raise InvalidSnapshot("the body needs the 'exact' state of GET", field="exact")
+    return registry.restore(name, codec.from_json(document["exact"], limit))
 
 
 @router.delete("/models/{name}", status_code=status.HTTP_204_NO_CONTENT)

@@ -7,10 +7,10 @@ from fastapi.responses import JSONResponse
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 
 import app
-from app.api.deps import RegistryDep, require_token
+from app.api.deps import KnownQueryRoute, RegistryDep, require_token
 from app.core import compiled
 
-router = APIRouter(tags=["operations"])
+router = APIRouter(tags=["operations"], route_class=KnownQueryRoute)
 
 
 @router.get("/healthz")

@@ -9,7 +9,14 @@ from fastapi.responses import Response
 from starlette.concurrency import run_in_threadpool
 
 from app.api.convert import to_json, to_step
-from app.api.deps import BEARER_DOCUMENTED, RegistryDep, SettingsDep, check_token, require_token
+from app.api.deps import (
+    BEARER_DOCUMENTED,
+    KnownQueryRoute,
+    RegistryDep,
+    SettingsDep,
+    check_token,
+    require_token,
+)
 from app.api.errors import TooLarge
 from app.api.schemas import (
     NAME_PATTERN,
@@ -26,7 +33,7 @@ from app.service.registry import DEFAULT_MODEL, ModelRegistry, Step
 ERRORS: dict[int | str, dict[str, object]] = {
     code: {"model": ErrorBody} for code in (401, 404, 413, 422, 503)
 }
-router = APIRouter(tags=["revise"], responses=ERRORS)
+router = APIRouter(tags=["revise"], responses=ERRORS, route_class=KnownQueryRoute)
 NamePath = Annotated[str, Path(pattern=NAME_PATTERN, description="Model name.")]
 
 

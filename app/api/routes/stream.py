@@ -30,6 +30,11 @@ async def model_stream(websocket: WebSocket, name: NamePath) -> None:
         await websocket.close(code=POLICY_VIOLATION, reason="missing or wrong bearer token")
         return
     await websocket.accept()
+    unknown = next((key for key in websocket.query_params if key != "token"), None)
+    if unknown is not None:  # as over HTTP: a misspelt option is not ignored
+        await refuse(websocket, error_body(
+            "invalid_query", "unknown query parameter; a stream takes token", unknown))
+        return
     try:
         registry.get(name)
     except ShieldError as error:

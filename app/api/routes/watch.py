@@ -14,14 +14,14 @@ from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, RedirectResponse, StreamingResponse
 
 from app.api.auth import given_token, token_ok
-from app.api.deps import RegistryDep, require_token
+from app.api.deps import KnownQueryRoute, RegistryDep, require_token
 from app.api.errors import NotFound, Unauthorized
 from app.api.routes.revise import ERRORS, NamePath
 
 STATIC = Path(__file__).resolve().parents[2] / "dashboard"
 QUEUE = 2000  # events kept for a slow watcher; past that new ones are dropped (and counted)
 
-router = APIRouter(tags=["live"], responses=ERRORS)
+router = APIRouter(tags=["live"], responses=ERRORS, route_class=KnownQueryRoute)
 
 
 @router.get("/models/{name}/events", response_class=StreamingResponse)
