@@ -1,4 +1,7 @@
-"""``python -m client run | report | compare | trace | demo``: car-following experiments."""
+"""``python -m client run | report | compare | trace | demo``: car-following experiments.
+
+Every error on the command line is one line that names the option at fault (exit status 2).
+"""
 
 from __future__ import annotations
 
@@ -13,7 +16,7 @@ import time
 from collections.abc import Iterator
 from functools import partial
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import Annotated, Any, Literal, NoReturn
 
 import httpx
 import typer
@@ -24,11 +27,13 @@ from client.experiment.progress import Progress
 from client.experiment.records import RecordError, read_all
 from client.experiment.trace import analyse as analyse_traces
 from client.shield import ShieldAPIError, ShieldClient, ShieldUnavailable
-from client.sim.car_following import RewardConfig
+from client.sim.car_following import MAX_STEPS, RewardConfig
 
 CHECKPOINT_MINUTES = 10.0  # how often lockstep groups save their state by default
+Transport = Literal["http", "ws", "batch"]
+Lead = Literal["train", "evaluation", "epa", "synthetic"]
 cli = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
-                  help=__doc__)
+                  rich_markup_mode=None, help=__doc__)  # plain help: readable at 80 columns
 
 
 def fail(message: str) -> NoReturn:
@@ -36,39 +41,84 @@ def fail(message: str) -> NoReturn:
     raise typer.Exit(2)
 
 
-def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str, transport: str,
-               out: Path, workers: int, token: str | None, lead: str,
+def json_object(text: str) -> dict[str, Any]:
+    """An option's JSON object, or the reason it is not one."""
+    try:
+        value = json.loads(text)
+    except ValueError as error:
+        raise typer.BadParameter(f"not JSON: {error}") from None
+    if not isinstance(value, dict):
+        raise typer.BadParameter("a JSON object {...}, not " + type(value).__name__)
+    return value
+
+
+def arms_option(text: str) -> str:
+    """``--arms``: every arm one that :func:`runner.parse_arm` knows."""
+    try:
+        for arm in text.split(","):
+            runner.parse_arm(arm.strip())
+    except ValueError as error:
+        raise typer.BadParameter(str(error)) from None
+    return text
+
+
+def shield_config_option(text: str) -> str:
+    """``--shield-config``: overrides that make a valid shield configuration."""
+    try:
+        ShieldConfig.from_dict(json_object(text))
+    except ShieldError as error:
+        raise typer.BadParameter(f"{error.field}: {error.message}" if error.field
+                                 else error.message) from None
+    return text
+
+
+def reward_option(text: str) -> str:
+    """``--reward``: constants that :class:`RewardConfig` has."""
+    try:
+        RewardConfig(**json_object(text))
+    except TypeError as error:
+        raise typer.BadParameter(str(error)) from None
+    return text
+
+
+def ddpg_option(text: str) -> str:
+    """``--ddpg``: settings that :class:`~client.agents.ddpg.DDPGConfig` has."""
+    from client.agents.ddpg import DDPGConfig  # torch: only when a run is asked for
+
+    try:
+        DDPGConfig(**json_object(text))
+    except TypeError as error:
+        raise typer.BadParameter(str(error)) from None
+    return text
+
+
+def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str,
+               transport: Transport, out: Path, workers: int, token: str | None, lead: Lead,
                shield_config: str = "{}", lockstep: int = 0, trace: bool = False,
                device: str = "cpu", checkpoint_every: float | None = None,
                deadline: float | None = None, update_first: bool = False,
-               reward: str = "{}", ddpg: str = "{}") -> str:
-    """Run, then report (or, stopped at ``deadline``, say how to go on); every failure a user
-    can cause becomes one line."""
+               reward: str = "{}", ddpg: str = "{}", shorter: str = "") -> str:
+    """Say what will run (and ``shorter``: how to make it shorter), run, then report (or,
+    stopped at ``deadline``, say how to go on); every failure a user can cause becomes one
+    line. The JSON options are checked by their options' callbacks."""
     try:
-        overrides = json.loads(shield_config)
-        ShieldConfig.from_dict(overrides)  # refuse a bad configuration before any run starts
         config = runner.ExperimentConfig(
             arms=tuple(a.strip() for a in arms.split(",") if a.strip()), runs=runs,
-            episodes=episodes, seed=seed, shield=shield, transport=transport,  # type: ignore[arg-type]
-            lead=lead, shield_config=overrides,  # type: ignore[arg-type]
+            episodes=episodes, seed=seed, shield=shield, transport=transport, lead=lead,
+            shield_config=json.loads(shield_config),
             ddpg={**({"update_first": True} if update_first else {}), **json.loads(ddpg)},
             reward=json.loads(reward))
-        try:
-            RewardConfig(**config.reward)  # refuse an unknown reward constant before any run
-        except TypeError as error:
-            fail(f"reward: {error}")
-        from client.agents.ddpg import DDPGConfig  # torch: only when a run starts
-
-        try:
-            DDPGConfig(**config.ddpg)
-        except TypeError as error:
-            fail(f"ddpg: {error}")
         if shield != "local":
             for url in config.shield_urls:
                 with contextlib.closing(ShieldClient(url, token=token)) as probe:
                     probe.health()
         total = len(config.arms) * runs * episodes
-        with Progress(total, recorded(out, config.arms)) as progress:
+        done = recorded(out, config.arms)
+        typer.echo(f"{'going on with' if done else 'running'} {', '.join(config.arms)}: "
+                   f"{runs} run(s) x {episodes} episodes each ({total:,} episodes of up to "
+                   f"{MAX_STEPS} steps{f', {done:,} done' if done else ''}), {workers} worker "
+                   f"process(es), records into {out}{shorter}", err=True)
+        with Progress(total, done) as progress:
             parallel.run_all(config, out, workers, token, progress, lockstep, trace, device,
                              checkpoint_every, deadline)
         if deadline is not None and parallel.past(deadline):
@@ -96,8 +146,9 @@ def recorded(out: Path, arms: tuple[str, ...]) -> int:
 
 @cli.command()
 def run(
-    arms: Annotated[str, typer.Option(help="Comma-separated: ddpg, idm, idm-aggressive, "
-                                            "random, each optionally +shield or +shadow.")]
+    arms: Annotated[str, typer.Option(
+        callback=arms_option, help="Comma-separated: ddpg, idm, idm-aggressive, random, "
+                                   "each optionally +shield or +shadow.")]
     = "ddpg,ddpg+shield",
     runs: Annotated[int, typer.Option(min=1)] = 10,
     episodes: Annotated[int, typer.Option(min=1)] = 1500,
@@ -105,17 +156,21 @@ def run(
     shield: Annotated[str, typer.Option(
         help="'local', or shield service URLs, comma-separated: run i uses the i-th in turn.")]
     = "local",
-    transport: Annotated[str, typer.Option(help="http, ws or batch (remote shields).")] = "ws",
+    transport: Annotated[Transport, typer.Option(help="How remote shields are reached.")]
+    = "ws",
     out: Annotated[Path, typer.Option(help="Records, summary, table and figure go here.")]
     = Path("runs/experiment"),
     workers: Annotated[int, typer.Option(min=1, help="Runs in parallel processes.")]
     = max(1, os.cpu_count() or 1),
     token: Annotated[str | None, typer.Option(envvar="SHIELD_TOKEN")] = None,
-    lead: Annotated[str, typer.Option(help="train, evaluation, epa or synthetic.")] = "train",
+    lead: Annotated[Lead, typer.Option(help="The lead vehicle's speed profiles.")]
+    = "train",
     shield_config: Annotated[str, typer.Option(
+        callback=shield_config_option,
         help='Overrides of the shield configuration as JSON, e.g. '
              '\'{"reviser": {"inspect": "first_index"}}\' (ablations).')] = "{}",
     lockstep: Annotated[bool, typer.Option(
+        "--lockstep",
         help="Train the runs of each DDPG arm together in one process, one batched update "
              "for all (equal to separate runs within rounding).")] = False,
     lockstep_runs: Annotated[int | None, typer.Option(
@@ -125,6 +180,7 @@ def run(
         help="With --lockstep: where the batched updates run, cpu or cuda (a CUDA graph).")]
     = "cpu",
     trace: Annotated[bool, typer.Option(
+        "--trace",
         help="Also write every decision of the shielded runs to OUT/traces (see 'trace').")]
     = False,
     checkpoint_minutes: Annotated[float | None, typer.Option(
@@ -134,13 +190,16 @@ def run(
         min=0, help="Stop after this many minutes: lockstep groups save their state, other "
                     "runs finish their episode; the same command goes on from there.")] = None,
     update_first: Annotated[bool, typer.Option(
+        "--update-first",
         help="DDPG updates before each step instead of after it, so that it learns while a "
              "shield service answers: faster over the network, the same records over every "
              "transport, not those of the usual order.")] = False,
     reward: Annotated[str, typer.Option(
+        callback=reward_option,
         help='Reward constants as JSON, e.g. \'{"failure_penalty": 60}\' (the paper\'s '
              'Eqs. 10-12 and none by default).')] = "{}",
     ddpg: Annotated[str, typer.Option(
+        callback=ddpg_option,
         help='DDPG settings as JSON, e.g. \'{"gamma": 0.99}\' (the paper\'s values, and '
              'this project\'s where it gives none, by default).')] = "{}",
 ) -> None:
@@ -161,9 +220,11 @@ def run(
     minutes = CHECKPOINT_MINUTES if checkpoint_minutes is None else checkpoint_minutes
     every = 60.0 * minutes if lockstep and minutes and not trace else None
     deadline = None if stop_after is None else time.time() + 60.0 * stop_after
+    shorter = ("; shorter: --runs 1 --episodes 20, or --stop-after MINUTES "
+               "(the same command goes on later)")
     typer.echo(experiment(arms, runs, episodes, seed, shield, transport, out, workers, token,
                           lead, shield_config, group, trace, device, every, deadline,
-                          update_first, reward, ddpg))
+                          update_first, reward, ddpg, shorter))
     if (out / "table.md").exists() and not checkpoint.pending(out):
         typer.echo(f"\nrecords, summary.json, table.md and figure.png in {out}")
 
@@ -233,7 +294,7 @@ def service(data_dir: Path) -> Iterator[str]:
          "--fsync", "never", "--log-level", "warning"], stdout=log, stderr=subprocess.STDOUT,
         preexec_fn=partial(parallel.die_with_parent, os.getpid()))
     try:
-        deadline = time.monotonic() + 120  # a first start compiles the core: about 15 s here
+        deadline = time.monotonic() + 120  # a first start compiles the core: about a minute
         while True:
             if process.poll() is not None:
                 fail(f"the shield service exited; see {log.name}")
@@ -257,7 +318,7 @@ def demo(
     episodes: Annotated[int, typer.Option(min=1)] = 120,
     seed: int = 1000,
     out: Path = Path("runs/demo"),
-    transport: str = "ws",
+    transport: Transport = "ws",
     workers: Annotated[int, typer.Option(min=1)] = max(1, os.cpu_count() or 1),
     lockstep: Annotated[bool, typer.Option(
         help="Train the runs of each arm together, one batched update for all, the arms in "
@@ -279,11 +340,26 @@ def demo(
                    f"start afresh, remove {out} or pass another --out")
     with tempfile.TemporaryDirectory(dir=out) as tmp, service(Path(tmp) / "data") as url:
         typer.echo(f"shield service at {url}; {runs} runs x {episodes} episodes per arm")
-        text = experiment(arms, runs, episodes, seed, url, transport, out,
-                          workers, None, "train", lockstep=runs if lockstep else 0)
+        text = experiment(arms, runs, episodes, seed, url, transport, out, workers, None,
+                          "train", lockstep=runs if lockstep else 0,
+                          shorter="; shorter: --runs 1 --episodes 20")
     typer.echo(text)
     typer.echo(f"\nfigure: {out / 'figure.png'}; records and summary.json in {out}")
 
 
+def main(args: list[str] | None = None) -> None:
+    """Run the command line; an error in it is one line naming the option (exit status 2)."""
+    try:
+        code = cli(args, standalone_mode=False)
+    except typer.TyperException as error:
+        message = error.format_message()
+        if "\n" in message:  # no command given: the message is the help
+            typer.echo(message, err=True)
+            sys.exit(error.exit_code)
+        typer.secho(f"error: {message}", err=True, fg="red")
+        sys.exit(error.exit_code)
+    sys.exit(code if isinstance(code, int) else 0)
+
+
 if __name__ == "__main__":
-    cli()
+    main()

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from client.experiment.lockstep import run_lockstep
+from client.experiment.progress import Progress
 from client.experiment.runner import ExperimentConfig, parse_arm, run_one
 
 PR_SET_PDEATHSIG = 1  # prctl(2)
@@ -39,7 +40,7 @@ def die_with_parent(parent: int) -> None:
 
 
 def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None = None,
-            bar: Any | None = None, lockstep: int = 0, trace: bool = False,
+            bar: Progress | None = None, lockstep: int = 0, trace: bool = False,
             device: str = "cpu", checkpoint_every: float | None = None,
             deadline: float | None = None) -> int:
     """Every (arm, run) in its own process, at most ``workers`` at a time. With ``lockstep``
@@ -79,6 +80,8 @@ def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None
                 progress.get()
                 if bar is not None:
                     bar.update(1)
+            if bar is not None:
+                bar.tick()
             for future in finished:
                 appended += future.result()
         return appended

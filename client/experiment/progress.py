@@ -36,6 +36,15 @@ class Progress:
         elif time.monotonic() - self._last >= self.every_s:
             self._line()
 
+    def tick(self) -> None:
+        """Time passed, whether or not an episode finished: the bar's clock moves on a
+        terminal, and off one a line comes once ``every_s`` is up, so that a run whose
+        episodes take minutes (its first ones compile the core) still says where it stands."""
+        if self._bar is not None:
+            self._bar.refresh()
+        elif time.monotonic() - self._last >= self.every_s:
+            self._line()
+
     def line(self) -> str:
         """Where the run stands: done of total, the rate since the previous line and the time
         left at that rate (episodes grow longer as a controller learns to survive, so the rate

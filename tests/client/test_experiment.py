@@ -431,13 +431,23 @@ def cli(*args: str) -> subprocess.CompletedProcess[str]:
 
 
 @pytest.mark.parametrize(("args", "message"), [
-    (("run", "--arms", "ddpg,teleport"), "unknown arm 'teleport'"),
+    (("run", "--arms", "ddpg,teleport"), "Invalid value for '--arms': unknown arm 'teleport'"),
     (("run", "--shield", "http://127.0.0.1:{port}", "--episodes", "1"), "unreachable"),
     (("report", "{tmp}/nothing"), "no record files"),
     (("run", "--shield-config", '{"reviser": {"inspect": "every"}}'),
-     "shield configuration: reviser.inspect"),
-    (("run", "--reward", '{"penalty": 60}'), "reward: "),
-    (("run", "--ddpg", '{"learning_rate": 1}'), "ddpg: "),
+     "Invalid value for '--shield-config': reviser.inspect: expected one of"),
+    (("run", "--shield-config", "{reviser: 1}"),
+     "Invalid value for '--shield-config': not JSON: Expecting property name"),
+    (("run", "--shield-config", "[1]"), "'--shield-config': a JSON object {...}, not list"),
+    (("run", "--reward", '{"penalty": 60}'), "Invalid value for '--reward': "),
+    (("run", "--ddpg", '{"learning_rate": 1}'), "Invalid value for '--ddpg': "),
+    (("run", "--ddpg", '{"gamma": 0.9'), "Invalid value for '--ddpg': not JSON"),
+    (("run", "--runs", "ten"), "Invalid value for '--runs'"),
+    (("run", "--runs", "0"), "Invalid value for '--runs'"),
+    (("run", "--transport", "udp"), "Invalid value for '--transport'"),
+    (("run", "--lead", "mars"), "Invalid value for '--lead'"),
+    (("run", "--episodez", "5"), "No such option: --episodez"),
+    (("runn",), "No such command 'runn'"),
 ])
 def test_user_errors_are_one_clear_line(tmp_path: Path, args: tuple[str, ...],
                                         message: str) -> None:
@@ -447,6 +457,28 @@ def test_user_errors_are_one_clear_line(tmp_path: Path, args: tuple[str, ...],
     assert result.returncode == 2
     assert message in result.stderr and "Traceback" not in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()  # refused before anything ran
+
+
+def test_the_help_of_run_names_every_option_whole_at_80_columns() -> None:
+    result = subprocess.run([sys.executable, "-m", "client", "run", "--help"],
+                            capture_output=True, text=True, timeout=120,
+                            env={**os.environ, "COLUMNS": "80"})
+    assert result.returncode == 0, result.stderr
+    assert max(len(line) for line in result.stdout.splitlines()) <= 80
+    for option in ("--arms", "--shield-config", "--checkpoint-minutes", "--stop-after",
+                   "--update-first", "--lockstep-runs", "--reward", "--ddpg"):
+        assert f"  {option} " in result.stdout or f"  {option}\n" in result.stdout
+
+
+def test_a_run_says_first_what_it_will_run_and_how_to_make_it_shorter(tmp_path: Path) -> None:
+    result = cli("run", "--arms", "idm", "--runs", "2", "--episodes", "1", "--lead",
+                 "synthetic", "--workers", "1", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.splitlines()[0] == (
+        f"running idm: 2 run(s) x 1 episodes each (2 episodes of up to 800 steps), 1 worker "
+        f"process(es), records into {tmp_path}; shorter: --runs 1 --episodes 20, or "
+        "--stop-after MINUTES (the same command goes on later)")
 
 
 def test_a_corrupt_record_file_is_one_clear_line(tmp_path: Path) -> None:

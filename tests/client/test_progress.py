@@ -29,3 +29,14 @@ def test_progress_waits_between_lines_and_says_nothing_when_nothing_ran() -> Non
     with Progress(total=10, stream=quiet):
         pass
     assert quiet.getvalue() == ""
+
+
+def test_a_tick_writes_a_line_once_the_interval_is_up_even_with_no_episode_done() -> None:
+    log = io.StringIO()
+    with Progress(total=10, every_s=0.0, stream=log) as progress:
+        progress.tick()
+    assert log.getvalue() == "episodes 0 of 10 (0%), 0.0 a minute, time left unknown yet\n"
+    quiet = io.StringIO()
+    with Progress(total=10, every_s=3600.0, stream=quiet) as progress:
+        progress.tick()
+    assert quiet.getvalue() == ""  # within the hour: nothing
