@@ -14,7 +14,7 @@ import logging
 import os
 import socket
 from collections import Counter
-from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterable, Sequence
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -27,6 +27,7 @@ from app.cluster.routing import named
 from app.core import ShieldError
 from app.main import create_app
 from app.service import codec
+from app.service.idempotency import Entry
 from app.service.registry import ModelRegistry
 from app.settings import Settings
 
@@ -160,8 +161,8 @@ class ShardServer:
 
     async def move(self, name: str, to: int) -> Reply | Moved:
         """Hand model ``name`` to shard ``to``: its requests here wait, its snapshot is
-        restored there, this shard records where it went and deletes its copy; the requests
-        that waited are then told where it is."""
+        restored there with the idempotency keys it remembers, this shard records where it
+        went and deletes its copy; the requests that waited are then told where it is."""
         async with self.gates.exclusive(name):
             if (away := self._away([name])) is not None:
                 return away
@@ -172,7 +173,8 @@ class ShardServer:
             if to != self.index:
                 with model.lock:
                     blob = codec.to_npz(model.shield.snapshot())
-                adopted: Reply = await self.peer(to, "adopt", name, blob)
+                    keys = model.keys.entries()
+                adopted: Reply = await self.peer(to, "adopt", name, blob, keys)
                 if adopted.status != 200:
                     return adopted
                 self.moved.set(name, to)  # stored before the copy here goes (see __init__)
@@ -180,11 +182,12 @@ class ShardServer:
                 log.info("model %r moved from shard %d to shard %d", name, self.index, to)
         return _json(200, {"model": name, "from": self.index, "to": to})
 
-    async def adopt(self, name: str, blob: bytes) -> Reply:
-        """Take model ``name`` from its snapshot (a move to this shard)."""
+    async def adopt(self, name: str, blob: bytes, keys: Sequence[Entry] = ()) -> Reply:
+        """Take model ``name`` from its snapshot and the idempotency keys it remembers (a move
+        to this shard)."""
         try:
             snapshot = codec.from_npz(blob, self.app.state.settings.max_snapshot_bytes)
-            self.registry.restore(name, snapshot)
+            self.registry.restore(name, snapshot, keys)
         except ShieldError as error:
             return _error(error)
         self.moved.discard(name)

@@ -5,13 +5,15 @@
 
 Decisions come back as :class:`app.core.Decision`, the very type the in-process shield returns.
 An error body raises :class:`ShieldAPIError` (status, code, message, field); a server that
-cannot be reached raises :class:`ShieldUnavailable`.
+cannot be reached raises :class:`ShieldUnavailable`. With ``retry=Retry()``, every step gets an
+idempotency key and is sent again when its answer does not come (:mod:`client.shield.retry`):
+the service applies it once.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
 from http import HTTPStatus
 from typing import Any
@@ -20,6 +22,7 @@ import httpx
 import websocket
 
 from app.core import Decision
+from client.shield.retry import Retry, call_with_retry, call_with_retry_async, keyed
 
 DEFAULT_TIMEOUT = 10.0  # [s]
 
@@ -36,12 +39,21 @@ class ShieldUnavailable(Exception):
     """The service could not be reached."""
 
 
+def worth_retrying(error: Exception) -> bool:
+    """Whether a step that failed so may succeed if sent again: no answer came, or the service
+    was unavailable for the moment (503, except a model set aside for damaged files)."""
+    if isinstance(error, ShieldUnavailable):
+        return True
+    return (isinstance(error, ShieldAPIError) and error.status == 503
+            and error.code != "model_quarantined")
+
+
 def step_body(observation: Sequence[float], action: float | None, **options: Any) -> dict[str, Any]:
     """A step's JSON body; options with their default value are left out."""
     body: dict[str, Any] = {"observation": [float(v) for v in observation],
                             "action": None if action is None else float(action)}
     defaults = {"stream": "0", "event": None, "done": False, "applied_action": None,
-                "learn": True, "shadow": False}
+                "learn": True, "shadow": False, "idempotency_key": None}
     for key, value in options.items():
         if key not in defaults:
             raise TypeError(f"unknown step option {key!r}")
@@ -88,13 +100,20 @@ class StepRequests:
 
 
 class ShieldClient:
-    """Synchronous HTTP client (keep-alive)."""
+    """Synchronous HTTP client (keep-alive); with ``retry``, steps are keyed and sent again
+    when their answer does not come."""
 
     def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
-                 timeout: float = DEFAULT_TIMEOUT) -> None:
+                 timeout: float = DEFAULT_TIMEOUT, retry: Retry | None = None) -> None:
         self.model = model
+        self.retry = retry
         self._http = httpx.Client(base_url=url, headers=_auth(token), timeout=timeout)
         self._steps = StepRequests(self._http, model)
+
+    def _step(self, request: Callable[[], httpx.Request]) -> Any:
+        if self.retry is None:
+            return self._send(request())
+        return call_with_retry(lambda: self._send(request()), self.retry, worth_retrying)
 
     def _call(self, method: str, path: str, **kwargs: Any) -> Any:
         return self._send(self._http.build_request(method, path, **kwargs))
@@ -110,13 +129,18 @@ class ShieldClient:
 
     def revise(self, observation: Sequence[float], action: float | None,
                **options: Any) -> Decision:
-        """One step; options are the API's (stream, event, done, applied_action, learn, ...)."""
+        """One step; options are the API's (stream, event, done, applied_action, learn,
+        idempotency_key, ...)."""
         body = step_body(observation, action, **options)
-        return Decision.from_dict(self._send(self._steps.revise(body)))
+        if self.retry is not None:
+            body = keyed(body)
+        return Decision.from_dict(self._step(lambda: self._steps.revise(body)))
 
     def revise_batch(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
         """Steps in order (each a step body; with a ``model`` key when no model is set)."""
-        result = self._send(self._steps.batch(steps))
+        if self.retry is not None:
+            steps = [keyed(s) for s in steps]
+        result = self._step(lambda: self._steps.batch(steps))
         return [Decision.from_dict(d) for d in result["decisions"]]
 
     def snapshot(self, name: str | None = None, **query: Any) -> dict[str, Any]:
@@ -162,10 +186,17 @@ class AsyncShieldClient:
     """Asynchronous HTTP client with the same methods, as coroutines."""
 
     def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
-                 timeout: float = DEFAULT_TIMEOUT) -> None:
+                 timeout: float = DEFAULT_TIMEOUT, retry: Retry | None = None) -> None:
         self.model = model
+        self.retry = retry
         self._http = httpx.AsyncClient(base_url=url, headers=_auth(token), timeout=timeout)
         self._steps = StepRequests(self._http, model)
+
+    async def _step(self, request: Callable[[], httpx.Request]) -> Any:
+        if self.retry is None:
+            return await self._send(request())
+        return await call_with_retry_async(lambda: self._send(request()), self.retry,
+                                           worth_retrying)
 
     async def _call(self, method: str, path: str, **kwargs: Any) -> Any:
         return await self._send(self._http.build_request(method, path, **kwargs))
@@ -182,10 +213,14 @@ class AsyncShieldClient:
     async def revise(self, observation: Sequence[float], action: float | None,
                      **options: Any) -> Decision:
         body = step_body(observation, action, **options)
-        return Decision.from_dict(await self._send(self._steps.revise(body)))
+        if self.retry is not None:
+            body = keyed(body)
+        return Decision.from_dict(await self._step(lambda: self._steps.revise(body)))
 
     async def revise_batch(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
-        result = await self._send(self._steps.batch(steps))
+        if self.retry is not None:
+            steps = [keyed(s) for s in steps]
+        result = await self._step(lambda: self._steps.batch(steps))
         return [Decision.from_dict(d) for d in result["decisions"]]
 
     async def snapshot(self, name: str | None = None, **query: Any) -> dict[str, Any]:
@@ -251,22 +286,30 @@ class BatchShield:
 
 
 class ShieldSession:
-    """One WebSocket connection: each step one frame, replies in order.
+    """One WebSocket connection: each step one frame, replies in order. With ``retry``, steps
+    are keyed, and a lost session is opened again and its unanswered steps sent again.
 
     Frames are read on the calling thread (websocket-client), with no reader thread of its own
     to hand them over: a training loop that asks for every action waits for nothing else.
     """
 
     def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
-                 timeout: float = DEFAULT_TIMEOUT) -> None:
+                 timeout: float = DEFAULT_TIMEOUT, retry: Retry | None = None) -> None:
         ws_url = url.replace("http://", "ws://", 1).replace("https://", "wss://", 1)
-        ws_url = ws_url.rstrip("/") + ("/ws" if model is None else f"/models/{model}/ws")
-        header = [f"Authorization: Bearer {token}"] if token else None
+        self._url = ws_url.rstrip("/") + ("/ws" if model is None else f"/models/{model}/ws")
+        self._header = [f"Authorization: Bearer {token}"] if token else None
+        self._timeout = timeout
+        self.retry = retry
+        self._ws = self._connect()
+        self._lost = False  # the connection broke: open another before the next send
+
+    def _connect(self) -> websocket.WebSocket:
+        ws_url, header = self._url, self._header
         try:
             # replies are decoded strictly as UTF-8 by recv(); the library's own byte-by-byte
             # check in Python would cost more than the step
-            self._ws = websocket.create_connection(ws_url, timeout=timeout, header=header,
-                                                   skip_utf8_validation=True)
+            return websocket.create_connection(ws_url, timeout=self._timeout, header=header,
+                                               skip_utf8_validation=True)
         except websocket.WebSocketBadStatusException as error:
             if error.status_code == HTTPStatus.FORBIDDEN:  # refused before the handshake
                 raise ShieldAPIError(error.status_code, "unauthorized",
@@ -293,22 +336,50 @@ class ShieldSession:
     def _decision(reply: dict[str, Any]) -> Decision:
         if "error" in reply:
             e = reply["error"]
-            status = {"unknown_model": 404, "too_large": 413}.get(e["code"], 422)
+            status = {"unknown_model": 404, "too_large": 413, "model_quarantined": 503,
+                      "shard_unavailable": 503}.get(e["code"], 422)
             raise ShieldAPIError(status, e["code"], e["message"], e.get("field"))
         return Decision.from_dict(reply)
 
     def revise(self, observation: Sequence[float], action: float | None,
                **options: Any) -> Decision:
-        self._send(json.dumps(step_body(observation, action, **options)))
-        return self._decision(self._receive())
+        body = step_body(observation, action, **options)
+        if self.retry is None:
+            self._send(json.dumps(body))
+            return self._decision(self._receive())
+        return self._exchange([keyed(body)])[0]
 
     def revise_batch(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
         """Send every step, then read every reply (pipelined, in order); errors are raised
         after all replies are read, so the session stays in step."""
+        if self.retry is not None:
+            return self._exchange([keyed(s) for s in steps])
         for step in steps:
             self._send(json.dumps(step))
         replies = [self._receive() for _ in steps]
         return [self._decision(r) for r in replies]
+
+    def _exchange(self, steps: Sequence[Mapping[str, Any]]) -> list[Decision]:
+        """Keyed steps sent and answered under :attr:`retry`: a lost session is opened again
+        and every step sent again (those applied already are answered, not applied again)."""
+        assert self.retry is not None
+        texts = [json.dumps(s) for s in steps]
+
+        def send() -> list[Decision]:
+            if self._lost:
+                self._ws = self._connect()
+                self._lost = False
+            try:
+                for text in texts:
+                    self._send(text)
+                replies = [self._receive() for _ in texts]
+            except ShieldUnavailable:
+                self._ws.close()
+                self._lost = True
+                raise
+            return [self._decision(r) for r in replies]
+
+        return call_with_retry(send, self.retry, worth_retrying)
 
     @staticmethod
     def revise_across(steps: Sequence[tuple[ShieldSession, Mapping[str, Any]]]) -> list[Decision]:

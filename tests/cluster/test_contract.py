@@ -1,5 +1,6 @@
-"""The service's HTTP and WebSocket contract (``tests/api/test_api.py``) through the ingress of
-a sharded service: the same tests, with the clients below in place of the plain app's."""
+"""The service's HTTP and WebSocket contract (``tests/api/test_api.py``,
+``tests/api/test_idempotency.py``) through the ingress of a sharded service: the same tests,
+with the clients below in place of the plain app's."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from fastapi.testclient import TestClient
 
 from app.settings import Settings
 from tests.api.test_api import *  # noqa: F403 (the tests themselves run here)
+from tests.api.test_idempotency import *  # noqa: F403
 from tests.cluster.sharded import sharded_client
 
 SHARD_SPECIFIC = {  # what a sharded service answers otherwise, and why

@@ -250,3 +250,15 @@ def test_a_shard_streams_the_live_feed_and_ends_it_once_the_model_moved() -> Non
             return await anext(servers[home].stream(asgi.Request("GET", "/models/default/events")))
 
         assert asyncio.run(reconnect()) == Moved("default", 1 - home)
+
+
+def test_a_moved_model_answers_a_step_sent_again_with_its_first_decision() -> None:
+    with sharded_client(Settings(), n_shards=2) as c:
+        name = NAMES[2]
+        c.post("/models", json={"name": name})
+        body = {**step(0), "idempotency_key": "before-the-move"}
+        first = c.post(f"/models/{name}/revise", json=body).json()
+        to = 1 - hashed_owner(name, 2)
+        assert c.post("/shards/move", json={"model": name, "to": to}).status_code == 200
+        assert c.post(f"/models/{name}/revise", json=body).json() == first
+        assert c.get(f"/models/{name}", params={"tpm": "none"}).json()["model_version"] == 1
