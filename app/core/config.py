@@ -379,7 +379,8 @@ class ShieldConfig:
 
     def __post_init__(self) -> None:
         names = [c.name for c in self.criteria]
-        _check(len(names) <= MAX_CRITERIA, "criteria", f"at most {MAX_CRITERIA} criteria")
+        # without a criterion no failure is learned and no proposal is ever revised
+        _check(1 <= len(names) <= MAX_CRITERIA, "criteria", f"1 to {MAX_CRITERIA} criteria")
         _check(len(set(names)) == len(names), "criteria", "criterion names must be unique")
         observed = self.observation.names
         for i, criterion in enumerate(self.criteria):

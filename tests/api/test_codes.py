@@ -82,3 +82,11 @@ def test_a_method_a_route_does_not_take_is_405_with_the_error_body(client: TestC
     assert r.status_code == 405
     assert r.json()["error"] | {"message": ""} == {"code": "method_not_allowed", "message": "",
                                                     "field": None}
+
+
+def test_a_configuration_without_criteria_is_refused(client: TestClient) -> None:
+    # it could learn no failure and would pass every proposal: a shield in name only
+    r = client.post("/models", json={"name": "blind", "config": {"criteria": []}})
+    assert (r.status_code, r.json()["error"]["code"], r.json()["error"]["field"]) == (
+        422, "invalid_config", "config.criteria")
+    assert client.get("/models/blind").status_code == 404
