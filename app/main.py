@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 from collections.abc import AsyncIterator
@@ -15,6 +16,7 @@ from app.api.metrics import AppMetrics
 from app.api.middleware import BodyLimit, Metrics
 from app.api.routes import models, ops, revise, stream, watch
 from app.core import ShieldConfig
+from app.service.limits import ModelLimits
 from app.service.registry import ModelRegistry
 from app.settings import Settings, get_settings
 
@@ -28,6 +30,12 @@ def default_config(settings: Settings) -> ShieldConfig:
     return ShieldConfig.from_dict(json.loads(settings.config.read_text()))
 
 
+def model_limits(settings: Settings) -> ModelLimits:
+    """What a model of this server may be (:mod:`app.service.limits`)."""
+    return ModelLimits(settings.max_states, settings.max_action_bins, settings.max_dimensions,
+                       settings.max_model_bytes)
+
+
 def create_app(settings: Settings | None = None, *, create_default: bool = True) -> FastAPI:
     """Build the service; models load (journals replay) when the app starts. A shard of a
     cluster (:mod:`app.cluster`) passes ``create_default=False``: the 'default' model lives on
@@ -35,7 +43,7 @@ def create_app(settings: Settings | None = None, *, create_default: bool = True)
     settings = settings or get_settings()
     registry = ModelRegistry(settings.data_dir, settings.fsync, settings.snapshot_every,
                              default_config(settings), max_models=settings.max_models,
-                             max_states=settings.max_states, create_default=create_default,
+                             limits=model_limits(settings), create_default=create_default,
                              idempotency_window=settings.idempotency_window)
 
     @asynccontextmanager
@@ -56,6 +64,7 @@ def create_app(settings: Settings | None = None, *, create_default: bool = True)
     )
     api.state.settings = settings
     api.state.registry = registry
+    api.state.restores = asyncio.Semaphore(settings.max_concurrent_restores)  # PUT /models/{name}
     api.state.metrics = AppMetrics(registry)
     errors.install(api)
     for router in (revise.router, models.router, stream.router, ops.router, watch.router):

@@ -51,6 +51,26 @@ class Settings(BaseSettings):
         100_000, ge=1, le=1_000_000,
         description="The largest limits.max_states a model of this server may have (422).",
     )
+    max_action_bins: int = Field(
+        256, ge=2, le=4096,
+        description="The most action bins (the range over the step) a model may have (422).",
+    )
+    max_dimensions: int = Field(
+        64, ge=1, le=1024,
+        description="The most observation names and features together a model may have (422).",
+    )
+    max_model_bytes: int = Field(
+        256 * 2**20, ge=2**20,
+        description="The most memory a model's tables may take once it holds its "
+        "limits.max_states states and limits.max_streams streams, by the server's estimate "
+        "(422, naming limits.max_states; the default configuration takes about 120 MiB). "
+        "Keep it within max_snapshot_bytes, so that every model's snapshot restores.",
+    )
+    max_concurrent_restores: int = Field(
+        2, ge=1, le=64,
+        description="Snapshots read at once by PUT /models/{name}; more wait their turn. "
+        "Each takes up to about twice max_snapshot_bytes while it is read.",
+    )
     snapshot_every: int = Field(
         50_000, ge=1, description="Steps of a model between two snapshots of it."
     )

@@ -18,6 +18,12 @@ from app.core.errors import InvalidSnapshot
 # Stored floats beyond this magnitude are refused: their squares (distances, potentials)
 # must stay finite.
 MAX_STORED = 1e100
+# Counters (steps, versions, and every count, which none of them exceeds) stay below this,
+# where integers are still exact as floats and no sum of counts overflows int64; at a million
+# steps a second a model reaches it in 285 years.
+MAX_COUNT = 2**53
+# How far a stored distribution's sum may lie from 1 (rounding of the truncated beliefs)
+SUM_TOLERANCE = 1e-6
 
 
 def integer(value: Any, field: str, low: int = 0, high: int | None = None) -> int:
@@ -51,6 +57,13 @@ def floats(value: Any, field: str, shape: Sequence[int] | None = None,
         raise InvalidSnapshot(f"entries must be finite and lie in [{low:g}, {high:g}]",
                               field=field)
     return array
+
+
+def distribution(prob: npt.NDArray[np.float64], field: str) -> None:
+    """Refuse probabilities (each in [0, 1] already) whose sum is not 1."""
+    if abs(float(prob.sum()) - 1.0) > SUM_TOLERANCE:
+        raise InvalidSnapshot(f"probabilities summing to {float(prob.sum()):g}, not 1",
+                              field=field)
 
 
 def ints(value: Any, field: str, shape: Sequence[int] | None = None, low: int = 0,

@@ -194,8 +194,13 @@ class EvolvingClusterer:
         self.stats = np.zeros((5, n))
         self.stats[SQ_NORM] = stored.floats(data["sq_norms"], "clustering.sq_norms", (n,),
                                             low=0.0)
+        norms = (centres.reshape(n, dim) ** 2).sum(axis=1)
+        if not np.allclose(self.stats[SQ_NORM], norms, rtol=1e-9, atol=1e-12):
+            raise InvalidSnapshot("a squared norm is not its centre's",
+                                  field="clustering.sq_norms")
+        # P = 1 / (1 + mean squared distance): in (0, 1]
         self.stats[POTENTIAL] = stored.floats(data["potentials"], "clustering.potentials",
-                                              (n,))
+                                              (n,), low=0.0, high=1.0)
         self.stats[RADIUS] = stored.floats(data["radii"], "clustering.radii", (n,), low=0.0)
         self.support_counts = stored.ints(data["support"], "clustering.support", (n,), low=1)
         self.stats[SCATTER] = stored.floats(data["scatter"], "clustering.scatter", (n,),

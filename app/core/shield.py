@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, overload
 
@@ -835,12 +835,19 @@ class Shield:
         }
 
     @classmethod
-    def from_snapshot(cls, data: dict[str, Any]) -> Shield:
-        """Rebuild a shield that makes exactly the decisions the original would make."""
+    def from_snapshot(cls, data: dict[str, Any],
+                      check: Callable[[ShieldConfig], None] | None = None) -> Shield:
+        """Rebuild a shield that makes exactly the decisions the original would make.
+
+        Every part is checked before it is used (:mod:`app.core._stored`): sizes against the
+        configuration, numbers finite and in range, probabilities in [0, 1] and beliefs summing
+        to 1, counts no larger than the learning steps that made them. ``check`` (a server's
+        bounds) judges the configuration before any array is built; its
+        :class:`InvalidConfig` is refused like the configuration's own."""
         if not isinstance(data, dict) or data.get("format") not in (2, 3, SNAPSHOT_FORMAT):
             raise InvalidSnapshot(f"expected snapshot format {SNAPSHOT_FORMAT}", field="format")
         try:
-            return cls._restore(data)
+            return cls._restore(data, check)
         except InvalidConfig as error:
             raise InvalidSnapshot(f"its configuration: {error.message}",
                                   field=f"config.{error.field}" if error.field else "config"
@@ -852,25 +859,36 @@ class Shield:
             raise InvalidSnapshot(f"snapshot is incomplete or inconsistent: {error!r}") from error
 
     @classmethod
-    def _restore(cls, data: dict[str, Any]) -> Shield:
-        self = cls(ShieldConfig.from_stored(data["config"]))
+    def _restore(cls, data: dict[str, Any],
+                 check: Callable[[ShieldConfig], None] | None) -> Shield:
+        config = ShieldConfig.from_stored(data["config"])
+        if check is not None:
+            check(config)
+        self = cls(config)
         cfg = self.config
         counters = data["counters"]
+        steps = stored.integer(counters["steps"], "counters.steps", high=stored.MAX_COUNT)
         self.counters = Counters(
-            steps=stored.integer(counters["steps"], "counters.steps"),
-            episodes=stored.integer(counters["episodes"], "counters.episodes"),
-            model_version=stored.integer(counters["model_version"], "counters.model_version"),
+            steps=steps,
+            episodes=stored.integer(counters["episodes"], "counters.episodes", high=steps),
+            model_version=stored.integer(counters["model_version"], "counters.model_version",
+                                         high=stored.MAX_COUNT),
             interventions={c.name: stored.integer(counters["interventions"][c.name],
-                                                  f"counters.interventions.{c.name}")
+                                                  f"counters.interventions.{c.name}",
+                                                  high=steps)
                            for c in cfg.criteria},
             streams_expired=stored.integer(counters.get("streams_expired", 0),
-                                           "counters.streams_expired"),
+                                           "counters.streams_expired", high=steps),
         )
         self._rng.bit_generator.state = data["rng"]
         limit = cfg.limits.max_states
         self.clusterer = EvolvingClusterer.restore(cfg.clustering, self.space.size, limit,
                                                    data["clustering"])
         tpm = data["transitions"]
+        if tpm["backend"] != cfg.limits.tpm_backend:
+            raise InvalidSnapshot(f"the matrices are {tpm['backend']!r}, the configuration's "
+                                  f"backend {cfg.limits.tpm_backend!r}",
+                                  field="transitions.backend")
         if tpm["backend"] == "dense":
             self.transitions = DenseTransitions.restore(cfg.action.n_bins, cfg.transitions, tpm)
         else:
@@ -889,7 +907,37 @@ class Shield:
         self.streams = {str(name): self._restore_stream(f"streams.{name}", s, n, slot)
                         for slot, (name, s) in enumerate(streams.items())}
         self._restore_risk(data, n)
+        self._check_counts()
         return self
+
+    def _check_counts(self) -> None:
+        """Refuse counts beyond the learning steps behind them: each learning step
+        clusters one observation (``clustering.k``), which one state absorbs (its support and
+        visits), and the local model learns it once (its tries)."""
+        steps, k = self.counters.steps, self.clusterer.k
+        flags, clusterer = self.flags, self.clusterer
+
+        def total(counts: npt.NDArray[np.int64]) -> float:  # (in floats: no sum overflows)
+            return float(counts.sum(dtype=np.float64))
+
+        parts: list[tuple[str, float, int]] = [
+            ("clustering.k", k, steps),
+            ("clustering.capacity_hits", clusterer.capacity_hits, k),
+            ("clustering.support", total(clusterer.support), k),
+            ("flags.visits", total(flags.visits), steps),
+            ("counters.failures", sum(self.counters.failures.values()), steps),
+        ]
+        if self.local_risk is not None:
+            parts.append(("local_risk.tried", total(self.local_risk.tried), steps))
+            parts.append(("local_risk.failures", total(self.local_risk.failures), steps))
+        for field_name, count, most in parts:
+            if count > most:
+                raise InvalidSnapshot(f"{count:.0f} counted, more than the {most} learning "
+                                      "steps behind it", field=field_name)
+        if (flags.entries > flags.visits).any():
+            raise InvalidSnapshot("a state entered more often than visited", field="flags.entries")
+        if (flags.failures.sum(axis=1, dtype=np.float64) > flags.visits).any():
+            raise InvalidSnapshot("a state's failures exceed its visits", field="flags.failures")
 
     def _restore_history(self, data: dict[str, Any]) -> None:
         """The failure counters and the history; a snapshot written before them (they are
@@ -921,6 +969,7 @@ class Shield:
                                  high=1.0)
             if not index.size or np.unique(index).size != index.size:
                 raise InvalidSnapshot("a belief names distinct states", field=f"{field}.index")
+            stored.distribution(prob, f"{field}.prob")
             belief = Belief(index, prob)
         q = self.config.action.n_bins
         return StreamState(slot, belief,
@@ -928,7 +977,8 @@ class Shield:
                                           high=q - 1),
                            stored.integer(data["proposed_bin"], f"{field}.proposed_bin",
                                           high=q - 1),
-                           stored.integer(data["step"], f"{field}.step"),
+                           stored.integer(data["step"], f"{field}.step",
+                                          high=self.counters.steps),
                            -1 if belief is None else belief.argmax(),
                            None if belief is None or data.get("z") is None
                            else stored.floats(data["z"], f"{field}.z", (self.space.size,)))

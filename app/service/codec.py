@@ -97,25 +97,37 @@ def to_npz(snapshot: dict[str, Any]) -> bytes:
 
 
 def from_npz(blob: bytes, limit: int = DEFAULT_LIMIT) -> dict[str, Any]:
-    """Invert :func:`to_npz`. Every member's header is read first: a dtype from
-    :data:`DTYPES` (text for ``meta`` alone), a size that its stored bytes can fill, at most
-    ``limit`` bytes inflated in all; a damaged archive or anything else raises
-    :class:`InvalidSnapshot`."""
+    """Invert :func:`to_npz`, inflating nothing the format does not name.
+
+    The archive's directory is read first (no member inflated): the sizes it declares must
+    stay within ``limit`` in all, and hold ``meta``. Then ``meta`` alone is inflated, and
+    every other member must be an array it names: one it does not is refused unread. Each
+    array's header must name a dtype from :data:`DTYPES` and exactly as many bytes as its
+    member declares, which is all that reading it inflates (zipfile stops at the declared
+    size). A damaged archive or anything else raises :class:`InvalidSnapshot`."""
     try:
         with zipfile.ZipFile(io.BytesIO(blob)) as archive:
-            sizes = {info.filename: info.file_size for info in archive.infolist()}
-            if sum(sizes.values()) > limit:
+            infos = archive.infolist()
+            names = [info.filename for info in infos]
+            if len(set(names)) != len(names):
+                raise InvalidSnapshot("the archive names a member twice", field="body")
+            if sum(info.file_size for info in infos) > limit:
                 raise InvalidSnapshot("the archive inflates beyond the size limit",
                                       field="body")
-            for name in sizes:
-                _check_member(archive, name)
-        with np.load(io.BytesIO(blob), allow_pickle=False) as arrays:
-            meta = json.loads(str(arrays["meta"]))
-            members = {name: arrays[name] for name in arrays.files if name != "meta"}
+            if META not in names:
+                raise InvalidSnapshot("the archive lacks its meta member", field="meta")
+            meta = json.loads(str(_read_member(archive, META)))
+            named = {f"{path}.npy" for path in _array_paths(meta)}
+            for name in names:
+                if name != META and name not in named:
+                    raise InvalidSnapshot("a member the snapshot does not name",
+                                          field=name.removesuffix(".npy"))
+            members = {name.removesuffix(".npy"): _read_member(archive, name)
+                       for name in names if name != META}
     except InvalidSnapshot:
         raise
     except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError,
-            RecursionError, UnicodeDecodeError) as error:
+            RecursionError, UnicodeDecodeError, NotImplementedError) as error:
         raise InvalidSnapshot(f"unreadable archive: {error}", field="body") from error
 
     def fill(value: Any) -> Any:
@@ -133,20 +145,42 @@ def from_npz(blob: bytes, limit: int = DEFAULT_LIMIT) -> dict[str, Any]:
     return result
 
 
-def _check_member(archive: zipfile.ZipFile, name: str) -> None:
-    """Refuse a member whose header names a dtype not allowed or more data than it holds."""
+META = "meta.npy"
+
+
+def _array_paths(meta: Any) -> list[str]:
+    """The members ``meta`` names: every ``{"__array__": path}`` in it."""
+    if isinstance(meta, dict):
+        if ARRAY in meta and len(meta) == 1:
+            return [str(meta[ARRAY])]
+        return [p for v in meta.values() for p in _array_paths(v)]
+    if isinstance(meta, list):
+        return [p for v in meta for p in _array_paths(v)]
+    return []
+
+
+def _read_member(archive: zipfile.ZipFile, name: str) -> np.ndarray:
+    """One array, its header checked before its data is inflated: a dtype allowed (text for
+    ``meta`` alone) and a size equal to what the member declares."""
     key = name.removesuffix(".npy")
+    declared = archive.getinfo(name).file_size
     with archive.open(name) as member:
         version = np.lib.format.read_magic(member)
         if version == (1, 0):
-            shape, _, dtype = np.lib.format.read_array_header_1_0(member)
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(member)
         else:
-            shape, _, dtype = np.lib.format.read_array_header_2_0(member)
-    allowed = dtype.kind == "U" if key == "meta" else dtype.str in DTYPES
-    if not allowed:
-        raise InvalidSnapshot(f"array dtype {dtype.str!r} is not allowed", field=key)
-    if math.prod(shape) * dtype.itemsize > archive.getinfo(name).file_size:
-        raise InvalidSnapshot("an array's header claims more data than it holds", field=key)
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(member)
+        allowed = dtype.kind == "U" if name == META else dtype.str in DTYPES
+        if not allowed:
+            raise InvalidSnapshot(f"array dtype {dtype.str!r} is not allowed", field=key)
+        size = math.prod(shape) * dtype.itemsize
+        if member.tell() + size != declared:
+            raise InvalidSnapshot("an array's header and its member's size disagree",
+                                  field=key)
+        data = bytearray(size)  # the only copy: the array is a writeable view of it
+        if member.readinto(data) != size:  # type: ignore[attr-defined]  # (a ZipExtFile)
+            raise InvalidSnapshot("an array's data ends early", field=key)
+    return np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C")
 
 
 def readable(shield: Shield, tpm: str = "sparse", action: int | None = None,

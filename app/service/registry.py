@@ -25,10 +25,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from app.core import Decision, InvalidConfig, Shield, ShieldConfig, ShieldError
+from app.core import Decision, Shield, ShieldConfig, ShieldError
 from app.core.shield import StepInput
 from app.service import codec
 from app.service.idempotency import Entry, KeyReused, KeyWindow, fingerprint
+from app.service.limits import ModelLimits
 from app.service.storage import Fsync, ModelStore
 
 log = logging.getLogger("app.registry")
@@ -129,12 +130,12 @@ class ModelRegistry:
     def __init__(self, data_dir: Path | None = None, fsync: Fsync = "interval",
                  snapshot_every: int = 50_000,
                  default_config: ShieldConfig | None = None, *, max_models: int = 1000,
-                 max_states: int = 100_000, create_default: bool = True,
+                 limits: ModelLimits | None = None, create_default: bool = True,
                  idempotency_window: int = IDEMPOTENCY_WINDOW) -> None:
         self.data_dir = data_dir
         self.idempotency_window = idempotency_window
         self.max_models = max_models
-        self.max_states = max_states
+        self.limits = limits or ModelLimits()
         self.fsync = fsync
         self.snapshot_every = snapshot_every
         self.default_config = default_config or ShieldConfig()
@@ -321,8 +322,7 @@ class ModelRegistry:
         the idempotency keys it remembers (a model moved from another shard)."""
         check_name(name)
         self._refuse_quarantined(name)
-        shield = Shield.from_snapshot(snapshot)
-        self._check_limits(shield.config)
+        shield = Shield.from_snapshot(snapshot, self.limits.check)  # bounds before arrays
         with self._lock:
             self._check_room(name)
             old = self._models.get(name)
@@ -339,9 +339,7 @@ class ModelRegistry:
             return model
 
     def _check_limits(self, config: ShieldConfig) -> None:
-        if config.limits.max_states > self.max_states:
-            raise InvalidConfig(f"this server allows at most {self.max_states} states a model",
-                                field="limits.max_states")
+        self.limits.check(config)
 
     def _check_room(self, name: str) -> None:
         if name not in self._models and len(self._models) >= self.max_models:

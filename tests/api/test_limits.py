@@ -39,5 +39,5 @@ def test_a_server_holds_at_most_max_models_and_max_states_a_model() -> None:
         snapshot = client.get("/models/m1").json()
         snapshot["exact"]["config"]["limits"]["max_states"] = 20_001
         r = client.put("/models/m1", json=snapshot)
-        assert r.status_code == 422 and r.json()["error"]["field"] == "limits.max_states"
+        assert r.status_code == 422 and r.json()["error"]["field"] == "config.limits.max_states"
         assert client.post("/models", json={"name": "m3"}).status_code == 201
