@@ -227,7 +227,7 @@ class ModelRegistry:
             shield = Shield(config)
         else:
             shield = Shield.from_snapshot(codec.from_npz(blob))
-            if not store.journal_path.exists() and not store.rotated_path.exists():
+            if not store.journal_path.exists():
                 raise DamagedModel("journal.log is missing: the steps learned after the "
                                    f"snapshot (version {shield.counters.model_version}) are "
                                    "not known")

@@ -112,7 +112,9 @@ class ModelStore:
 
     def rotate(self) -> None:
         """Start a new, empty journal; the records so far join ``journal.1.log`` until
-        :meth:`write_snapshot` stores the snapshot that covers them."""
+        :meth:`write_snapshot` stores the snapshot that covers them. ``journal.log`` exists at
+        every moment (a crash in between leaves its records in both files, and the replay
+        skips the second copy by version), so a missing journal is always damage."""
         with self._lock:
             if self._journal is not None:
                 self._journal.flush()
@@ -127,10 +129,9 @@ class ModelStore:
                         f.flush()
                         os.fsync(f.fileno())
                 else:
-                    os.replace(self.journal_path, self.rotated_path)
-            with open(self.journal_path, "wb") as f:
-                os.fsync(f.fileno())
-            sync_directory(self.directory)
+                    os.link(self.journal_path, self.rotated_path)
+                    sync_directory(self.directory)
+            write_atomic(self.journal_path, b"")
 
     def write_snapshot(self, blob: bytes) -> None:
         """Store a snapshot that covers every record rotated before it."""

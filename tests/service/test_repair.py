@@ -120,3 +120,13 @@ def test_a_model_created_without_steps_loads_and_gets_its_files(tmp_path: Path) 
     registry = reopen(tmp_path)
     assert version(registry) == 0
     assert (model / "snapshot.npz").exists() and (model / "journal.log").exists()
+
+
+def test_a_journal_deleted_while_a_snapshot_was_written_is_damage_too(tmp_path: Path) -> None:
+    """Killed while a snapshot was being written: journal.1.log holds the records it will
+    cover, journal.log those after it; without journal.log the latter are unknown."""
+    stored_model(tmp_path)
+    model = tmp_path / "models" / "m"
+    (model / "journal.1.log").write_bytes((model / "journal.log").read_bytes())
+    (model / "journal.log").unlink()
+    assert "journal.log is missing" in reopen(tmp_path).quarantined["m"]
