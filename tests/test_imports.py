@@ -1,6 +1,6 @@
 """The dependency rule: app.core <- app.service <- app.api <- app.main; app never imports
-client; nothing of the service imports torch (its container has none), and only the Ray
-deployment imports Ray (an optional extra)."""
+client; nothing of the service imports torch (its container has none), nor does the Python
+client (its extra has none); only the Ray deployment imports Ray (an optional extra)."""
 
 from __future__ import annotations
 
@@ -35,6 +35,19 @@ def test_service_layer_knows_nothing_of_http() -> None:
 @pytest.mark.parametrize("module", ["app.main", "app.__main__", "app.cluster.ray_serve"])
 def test_the_service_imports_neither_torch_nor_the_client(module: str) -> None:
     assert not top(imported_after(module)) & {"torch", "client"}
+
+
+@pytest.mark.parametrize("module", ["client.shield", "client.sim"])
+def test_the_python_client_needs_no_torch(module: str) -> None:
+    """What the 'client' extra installs (httpx, websocket-client, gymnasium) is enough for the
+    clients, the WebSocket session, the wrappers and the simulator: torch, blocked here, is
+    never imported, nor is anything of the 'experiment' or 'service' extras."""
+    code = (f"import sys; sys.modules['torch'] = None; import {module}; "
+            "print('\\n'.join(sorted(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    loaded = top(set(out.stdout.split()))
+    assert not loaded & {"typer", "tqdm", "matplotlib", "fastapi", "uvicorn", "pydantic"}
 
 
 def test_ray_is_loaded_only_by_the_ray_deployment() -> None:
