@@ -99,7 +99,8 @@ def per_run(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
 
 def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
     """Per arm: the table's counts, the episode after which each run never fails, speed
-    differences over successful episodes, and interventions."""
+    differences over successful episodes, and interventions (the actions the shield revised)
+    with their share of all steps."""
     by_arm: dict[str, list[EpisodeRecord]] = defaultdict(list)
     for record in episodes:
         by_arm[record.arm].append(record)
@@ -128,6 +129,8 @@ def summarise(episodes: list[EpisodeRecord]) -> dict[str, Any]:
             "speed_difference_mean": mean,
             "speed_difference_variance": var,
             "interventions": dict(interventions),
+            "steps": sum(r.steps for r in records),
+            "revised_share": sum(interventions.values()) / max(1, sum(r.steps for r in records)),
             "revisions_in_shadow": sum(r.revisions_would for r in records),
         }
     return summary
@@ -144,7 +147,8 @@ def table(summary: dict[str, Any], notes: dict[str, str] | None = None) -> str:
     extra = ("", "") if notes is None else (" shield configuration |", "---|")
     lines = [
         "| arm | runs | episodes | success | large distance | collision | no failure after "
-        f"episode | speed difference mean | variance | interventions |{extra[0]}",
+        f"episode | speed difference mean | variance | interventions (share of steps) |"
+        f"{extra[0]}",
         f"|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|{extra[1]}",
     ]
     for arm, s in summary.items():
@@ -154,7 +158,7 @@ def table(summary: dict[str, Any], notes: dict[str, str] | None = None) -> str:
             f"({100 * s['success_rate']:.1f}%) | {s['large_distance']} | {s['collision']} "
             f"| {s['never_fails_after']} | {four(s['speed_difference_mean'])} "
             f"| {four(s['speed_difference_variance'])} | {sum(s['interventions'].values())} "
-            f"|{note}")
+            f"({100 * s['revised_share']:.1f}%) |{note}")
     return "\n".join(lines)
 
 

@@ -136,7 +136,9 @@ def test_summary_numbers_by_hand() -> None:
     assert s["speed_difference_mean"] == pytest.approx(mean)
     assert s["speed_difference_variance"] == pytest.approx(second - mean**2)
     assert s["interventions"] == {"collision": 3}
+    assert s["steps"] == 90 and s["revised_share"] == pytest.approx(3 / 90)
     assert "| a | 2 | 6 | 3 (50.0%) | 1 | 2 | 3 |" in report.table({"a": s})
+    assert report.table({"a": s}).endswith(" | 3 (3.3%) |")  # revised: 3 of 90 steps
     first, second = s["per_run"]
     assert (first["successes"], first["large_distance"], first["collision"]) == (2, 0, 1)
     assert (second["successes"], second["large_distance"], second["collision"]) == (1, 1, 1)
