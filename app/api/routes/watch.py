@@ -91,7 +91,9 @@ def root() -> RedirectResponse:
 
 
 @router.get("/dashboard", include_in_schema=False)
-def dashboard() -> FileResponse:
+def dashboard(model: Annotated[str | None, Query(
+        description="The model the page opens on; its script reads it.")] = None
+              ) -> FileResponse:
     """The page; it holds no data, so it needs no token (its requests do)."""
     return FileResponse(STATIC / "index.html")
 
