@@ -5,7 +5,9 @@ line and headers, or body, never finish arriving (a slowloris holds a socket and
 and it has no limit on open connections that a half-sent request cannot pass. Here:
 
 * the request line and headers must arrive within ``header_timeout`` seconds of the
-  connection's opening or of the first byte of the request; a body may pause at most
+  connection's opening or of the first byte of the request, and take at most
+  :data:`MAX_HEADER_BYTES` (else 431 ``headers_too_large``; httptools keeps any amount until the
+  headers end, 1 MiB of them were served); a body may pause at most
   ``body_timeout`` seconds between two reads (nginx's ``client_header_timeout`` and
   ``client_body_timeout``); past either, 408 ``request_timeout`` and the connection closes;
 * a connection that would be one more than ``max_connections`` open (HTTP and WebSocket) is
@@ -35,6 +37,8 @@ from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIO
 from app.api.errors import error_body
 
 log = logging.getLogger("app.api")
+MAX_HEADER_BYTES = 64 * 1024  # [bytes] a request line and its headers (nginx: 4 x 8 KiB)
+LINGER = 2.0  # [s] a refused connection is read and dropped so long for its answer to arrive
 
 
 @dataclass(frozen=True)
@@ -51,6 +55,8 @@ class LimitedHttp(HttpToolsProtocol):
 
     limits: ClassVar[ConnectionLimits]
     _timer: asyncio.TimerHandle | None = None
+    _header_bytes: int | None = None  # of the request line and headers read; None: not in them
+    _refused = False  # answered: what else arrives is dropped until the client or LINGER ends
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
         super().connection_made(transport)
@@ -61,7 +67,19 @@ class LimitedHttp(HttpToolsProtocol):
                          f"the server has its most connections open "
                          f"({self.limits.max_connections}); try again shortly")
             return
+        self._header_bytes = 0
         self._arm(self.limits.header_timeout, self._headers_late)
+
+    def data_received(self, data: bytes) -> None:
+        if self._refused:
+            return
+        in_headers = self._header_bytes is not None
+        super().data_received(data)
+        if in_headers and self._header_bytes is not None:  # the whole chunk: header bytes
+            self._header_bytes += len(data)
+            if self._header_bytes > MAX_HEADER_BYTES:
+                self._answer(HTTPStatus.REQUEST_HEADER_FIELDS_TOO_LARGE, "headers_too_large",
+                             f"the request line and headers take over {MAX_HEADER_BYTES} bytes")
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._disarm()
@@ -70,9 +88,11 @@ class LimitedHttp(HttpToolsProtocol):
     def on_message_begin(self) -> None:
         super().on_message_begin()
         if self._timer is None:  # the next request of a kept-alive connection
+            self._header_bytes = 0
             self._arm(self.limits.header_timeout, self._headers_late)
 
     def on_headers_complete(self) -> None:
+        self._header_bytes = None
         self._disarm()
         super().on_headers_complete()
         if not (self.parser.should_upgrade() and self._should_upgrade()):
@@ -114,16 +134,21 @@ class LimitedHttp(HttpToolsProtocol):
                      f"the request body paused over {self.limits.body_timeout} s")
 
     def _answer(self, status: HTTPStatus, code: str, message: str) -> None:
-        """Write a whole response with the service's error body, then close."""
-        if self.transport.is_closing():
+        """Write a whole response with the service's error body and end the connection: the
+        response and its end go out, and whatever the client still sends is read and dropped
+        for at most :data:`LINGER` (a close with unread data would reset the connection and
+        lose the answer)."""
+        if self.transport.is_closing() or self._refused:
             return
+        self._refused = True
         body = json.dumps(error_body(code, message)).encode()
         head = [f"HTTP/1.1 {status.value} {status.phrase}".encode()]
         head += [name + b": " + value for name, value in self.server_state.default_headers]
         head += [b"content-type: application/json", b"content-length: %d" % len(body),
                  b"connection: close"]
         self.transport.write(b"\r\n".join(head) + b"\r\n\r\n" + body)
-        self.transport.close()
+        self.transport.write_eof()
+        self._arm(LINGER, self.transport.close)
 
     def _arm(self, seconds: float, then: Callable[[], None]) -> None:
         self._disarm()

@@ -114,6 +114,20 @@ def test_a_request_the_parser_cannot_read_gets_the_error_body(server: Server) ->
     assert (status, error["code"]) == (400, "bad_request") and error["message"]
 
 
+def test_headers_over_their_limit_get_431_and_a_large_body_does_not(server: Server) -> None:
+    with socket.create_connection(address(server)) as s:
+        s.sendall(b"GET /healthz HTTP/1.1\r\nHost: shield\r\nX-Big: " + b"a" * 2**20)
+        status, error = error_of(until_closed([s], seconds=5)[s])
+    assert (status, error["code"]) == (431, "headers_too_large")
+    body = b"x" * 200_000  # headers and body in one write: only the headers count
+    with socket.create_connection(address(server)) as s:
+        s.sendall(b"PUT /models/big HTTP/1.1\r\nHost: shield\r\nConnection: close\r\n"
+                  b"Content-Type: application/json\r\nContent-Length: %d\r\n\r\n" % len(body)
+                  + body)
+        status, error = error_of(until_closed([s], seconds=10)[s])
+    assert (status, error["code"]) == (422, "invalid_snapshot")
+
+
 @pytest.mark.parametrize("size", [5_000, 2_000_000])
 def test_a_websocket_frame_over_twice_the_limit_is_closed_with_1009(server: Server,
                                                                     size: int) -> None:
