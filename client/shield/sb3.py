@@ -7,14 +7,17 @@ This buffer stores ``info["applied_action"]`` instead::
 
     model = TD3("MlpPolicy", ShieldWrapper(env), replay_buffer_class=AppliedActionReplayBuffer)
 
-:class:`Failures` is a callback that counts what the shield saw during training.
+:class:`Failures` is a callback that counts what the shield saw during training, and can
+report it as it goes.
 
 Needs ``stable-baselines3`` (``pip install .[sb3]``).
 """
 
 from __future__ import annotations
 
+import time
 from collections import Counter
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -41,14 +44,26 @@ class AppliedActionReplayBuffer(ReplayBuffer):
 
 class Failures(BaseCallback):
     """Counts, over a training, the failures the environment reports in ``info[key]``, the
-    episodes and the steps the shield revised."""
+    episodes and the steps the shield revised.
 
-    def __init__(self, key: str = "event") -> None:
+    With ``report`` (``print``, a logger's ``info``), it hands it :meth:`progress` every
+    ``every_s`` seconds of training, so that a long training says how it goes.
+    """
+
+    def __init__(self, key: str = "event", report: Callable[[str], object] | None = None,
+                 every_s: float = 30.0) -> None:
         super().__init__()
         self.key = key
         self.failures: Counter[str] = Counter()
         self.episodes = 0
         self.revised = 0
+        self.report = report
+        self.every_s = every_s
+        self._start = self._next = 0.0
+
+    def _on_training_start(self) -> None:
+        self._start = time.monotonic()
+        self._next = self._start + self.every_s
 
     def _on_step(self) -> bool:
         for info, done in zip(self.locals["infos"], self.locals["dones"], strict=True):
@@ -57,4 +72,14 @@ class Failures(BaseCallback):
             self.episodes += bool(done)
             shield = info.get("shield")
             self.revised += bool(shield and shield["revised"])
+        if self.report is not None and time.monotonic() >= self._next:
+            self._next = time.monotonic() + self.every_s
+            self.report(self.progress())
         return True
+
+    def progress(self) -> str:
+        """One line: steps done of the training's, episodes, failures, revisions, seconds."""
+        total = self.model._total_timesteps
+        return (f"{self.num_timesteps}/{total} steps, {self.episodes} episodes, "
+                f"{sum(self.failures.values())} failures {dict(self.failures)}, "
+                f"{self.revised} revised, {time.monotonic() - self._start:.0f} s")

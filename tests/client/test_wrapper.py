@@ -249,7 +249,7 @@ def test_sb3_learns_from_the_applied_action() -> None:
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.noise import NormalActionNoise
 
-    from client.shield.sb3 import AppliedActionReplayBuffer
+    from client.shield.sb3 import AppliedActionReplayBuffer, Failures
 
     class Applied(BaseCallback):
         def __init__(self) -> None:
@@ -270,8 +270,13 @@ def test_sb3_learns_from_the_applied_action() -> None:
                 replay_buffer_class=AppliedActionReplayBuffer,
                 policy_kwargs={"net_arch": [16, 16]})
     callback = Applied()
-    model.learn(total_timesteps=300, callback=callback)
+    lines: list[str] = []
+    failures = Failures(report=lines.append, every_s=0.0)  # a progress line every step
+    model.learn(total_timesteps=300, callback=[callback, failures])
     assert callback.revised > 0
+    assert len(lines) == 300 and lines[-1].startswith("300/300 steps, ")
+    assert f"{failures.revised} revised" in lines[-1] and failures.revised == callback.revised
+    assert f"{sum(failures.failures.values())} failures" in lines[-1]
     stored = model.replay_buffer.actions[:300, 0, 0]  # type: ignore[union-attr]
     np.testing.assert_allclose(stored, np.array(callback.applied), atol=1e-6)  # [-1, 1] here
 
