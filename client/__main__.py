@@ -115,9 +115,9 @@ def experiment(arms: str, runs: int, episodes: int, seed: int, shield: str,
         total = len(config.arms) * runs * episodes
         done = recorded(out, config.arms)
         typer.echo(f"{'going on with' if done else 'running'} {', '.join(config.arms)}: "
-                   f"{runs} run(s) x {episodes} episodes each ({total:,} episodes of up to "
-                   f"{MAX_STEPS} steps{f', {done:,} done' if done else ''}), {workers} worker "
-                   f"process(es), records into {out}{shorter}", err=True)
+                   f"{runs} x {episodes} episodes per arm ({total:,} episodes of up to "
+                   f"{MAX_STEPS} steps{f', {done:,} done' if done else ''}) in {workers} "
+                   f"worker process(es), records into {out}{shorter}", err=True)
         with Progress(total, done) as progress:
             parallel.run_all(config, out, workers, token, progress, lockstep, trace, device,
                              checkpoint_every, deadline)

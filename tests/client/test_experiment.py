@@ -478,7 +478,7 @@ def test_a_run_says_first_what_it_will_run_and_how_to_make_it_shorter(tmp_path: 
                  "synthetic", "--workers", "1", "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
     assert result.stderr.splitlines()[0] == (
-        f"running idm: 2 run(s) x 1 episodes each (2 episodes of up to 800 steps), 1 worker "
+        f"running idm: 2 x 1 episodes per arm (2 episodes of up to 800 steps) in 1 worker "
         f"process(es), records into {tmp_path}; shorter: --runs 1 --episodes 20, or "
         "--stop-after MINUTES (the same command goes on later)")
 
