@@ -8,7 +8,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -67,12 +67,14 @@ class Server:
                 self.kill()
 
 
-def start_server(data_dir: Path, *args: str, env: dict[str, str] | None = None) -> Server:
-    """``python -m app serve`` on a free port; returns once /readyz answers 200."""
+def start_server(data_dir: Path, *args: str, env: dict[str, str] | None = None,
+                 wrapper: Sequence[str] = ()) -> Server:
+    """``python -m app serve`` on a free port (run by ``wrapper``, as ``prlimit --as=...``,
+    if given); returns once /readyz answers 200."""
     port = free_port()
     log = data_dir.parent / f"server-{port}.log"
-    command = [sys.executable, "-m", "app", "serve", "--host", "127.0.0.1", "--port", str(port),
-               "--data-dir", str(data_dir), *args]
+    command = [*wrapper, sys.executable, "-m", "app", "serve", "--host", "127.0.0.1",
+               "--port", str(port), "--data-dir", str(data_dir), *args]
     process = subprocess.Popen(command, stdout=open(log, "wb"), stderr=subprocess.STDOUT,
                                env={**os.environ, **(env or {})})
     url = f"http://127.0.0.1:{port}"

@@ -363,9 +363,14 @@ class LazyTransitions:
             cols = stored.ints(entry["cols"], f"{field}.cols", (total,), high=max(n - 1, 0),
                                dtype=np.int32)
             vals = stored.floats(entry["vals"], f"{field}.vals", (total,), low=0.0)
-            keys = np.repeat(np.arange(n, dtype=np.int64), nnz) * max(n, 1) + cols
-            if np.unique(keys).size != total:
+            rows = np.repeat(np.arange(n, dtype=np.int64), nnz)
+            if np.unique(rows * max(n, 1) + cols).size != total:
                 raise InvalidSnapshot("a row names a next state twice", field=f"{field}.cols")
+            # each row's learned sum is its entries' (nnz 0: nothing learned, a sum of 0)
+            if not np.allclose(np.bincount(rows, weights=vals, minlength=n), self._row_sum[a],
+                               rtol=1e-6, atol=0.0):
+                raise InvalidSnapshot("a row's learned sum is not the sum of its entries",
+                                      field=f"{field}.row_sum")
             self._cap[a] = nnz
             pool_cols.append(cols)
             pool_vals.append(vals)

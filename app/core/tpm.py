@@ -214,10 +214,12 @@ class DenseTransitions:
     ) -> DenseTransitions:
         """Rebuild from :meth:`snapshot` output, every part checked."""
         self = cls(n_actions, config)
-        P = stored.floats(data["P"], "transitions.P", low=0.0)
+        P = stored.floats(data["P"], "transitions.P", low=0.0, high=1.0)
         n = P.shape[1] if P.ndim == 3 else -1
         if P.shape != (n_actions, n, n):
             raise InvalidSnapshot("expected one square matrix per action", field="transitions.P")
+        if not np.allclose(P.sum(axis=2), 1.0, rtol=0.0, atol=stored.SUM_TOLERANCE):
+            raise InvalidSnapshot("a row of a matrix does not sum to 1", field="transitions.P")
         self.P = P
         self.F_o = stored.floats(data["F_o"], "transitions.F_o", (n_actions, n), low=0.0)
         return self

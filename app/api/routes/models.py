@@ -34,12 +34,11 @@ def summary(model: Model) -> dict[str, Any]:
                               "description": "model_exists or too_many_models"}})
 def create_model(body: ModelCreate, registry: RegistryDep) -> dict[str, Any]:
     """Create an empty model with the paper's configuration and the given overrides."""
-    try:
-        config = ShieldConfig.from_dict(body.config)
+    try:  # the core's bounds, then the server's: either names the body's field
+        return summary(registry.create(body.name, ShieldConfig.from_dict(body.config)))
     except InvalidConfig as error:
         error.field = f"config.{error.field}" if error.field else "config"
         raise
-    return summary(registry.create(body.name, config))
 
 
 @router.get("/models", response_model=ModelList)
