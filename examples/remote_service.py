@@ -51,6 +51,7 @@ def start_service(stack: ExitStack) -> str:
     say(f"starting the shield service at {url} (a first start compiles its core: a minute "
         f"or two)")
     start = time.monotonic()
+    next_report = start + 30.0
     while time.monotonic() - start < START_S:
         if server.poll() is not None:
             raise RuntimeError(f"the shield service exited with status {server.returncode}")
@@ -61,6 +62,9 @@ def start_service(stack: ExitStack) -> str:
             return url
         except ShieldUnavailable:
             time.sleep(0.5)
+        if time.monotonic() >= next_report:
+            next_report += 30.0
+            say(f"  not answering yet after {time.monotonic() - start:.0f} s (compiling)")
     raise RuntimeError(f"the shield service did not answer within {START_S:.0f} s")
 
 

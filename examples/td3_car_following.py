@@ -4,7 +4,7 @@ The shielded learner stores the action the shield applied (``AppliedActionReplay
 the one it proposed. The shield learns from the first step and acts after a warm-up (a quarter
 of the run unless ``--warmup`` says otherwise): before that it only watches, and both arms
 meet the same failures. Prints progress every 30 s, then failures (collisions, falling more
-than 200 m behind) per 1000 steps of training for both. About 3 minutes on a 2-core machine
+than 200 m behind) per 1000 steps of training for both. About 4 minutes on a 2-core machine
 as written; ``--steps 10000 --warmup 5000`` is the bench's setting (results/sb3/README.md).
 
     .venv/bin/pip install -e ".[client,sb3]"
