@@ -98,7 +98,7 @@ class ObservationSpec:
     keeps a dimension linear. Every unit within k of zero counts twice, ``x + clip(x, -k, k)``,
     scaled by the bounds as if linear: the close range spans twice as much of the clustering
     space and the far range keeps its resolution. The default knee of 20 m on the headway
-    gives the seconds before a crash states of their own (docs/research-log.md).
+    gives the seconds before a crash states of their own (docs/lab/research-log.md).
     """
 
     names: tuple[str, ...] = ("v_ego", "headway", "v_lead")
@@ -275,7 +275,7 @@ class ReviserConfig:
     predicted states (Algs. 1-3, with every switch below; :meth:`ShieldConfig.paper`). Either
     revises only after ``activate_after_episodes`` episodes, learning from the controller's
     own actions until then: from the first episode by default (the risk reviser reads a risk
-    only once a failure was learned; docs/risk-reviser.md), after the paper's xi = 50 in
+    only once a failure was learned; docs/lab/risk-reviser.md), after the paper's xi = 50 in
     :meth:`ShieldConfig.paper` and :meth:`ShieldConfig.paper_literal`. ``seed`` drives the
     paper reviser's noise.
     """
@@ -316,7 +316,7 @@ class RiskConfig:
     within ``horizon`` steps, from a linear model per state in the observation and the action)
     is at most ``threshold`` or within ``margin`` of the safest action's; otherwise the nearest
     allowed action replaces it. The defaults act on any measurable difference
-    (docs/risk-reviser.md).
+    (docs/lab/risk-reviser.md).
 
     The reach (:mod:`app.core.reach`) asks first whether a failure can still be avoided:
     ``reach_horizon`` steps of the learned dynamics under the safest action after the one
@@ -534,7 +534,7 @@ def _require(part: Any, keys: list[str], at: str) -> None:
 def _from_version_1(data: Mapping[str, Any]) -> dict[str, Any]:
     """Version 1 (no ``version`` field) to 2. A field that version 1 lacked takes the value it
     was added with, where the default has changed since; the switches removed in version 2 lost
-    their trials (docs/research-log.md) and must hold the value whose behaviour remains."""
+    their trials (docs/lab/research-log.md) and must hold the value whose behaviour remains."""
     out = _copy(data)
     sections = {name: part for name, part in out.items() if isinstance(part, dict)}
     observation = sections.get("observation", {})
@@ -561,7 +561,7 @@ def _from_version_1(data: Mapping[str, Any]) -> dict[str, Any]:
 
 def _from_version_2(data: Mapping[str, Any]) -> dict[str, Any]:
     """Version 2 to 3: the counted risk model (per state and action outcome counts and value
-    iteration) lost to the local one everywhere (docs/risk-reviser.md) and was removed with
+    iteration) lost to the local one everywhere (docs/lab/risk-reviser.md) and was removed with
     its settings. A risk reviser that used it (``risk.model`` missing means it: it came first)
     cannot be reproduced; its settings mean nothing to any other configuration."""
     out = _copy(data)

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The risk reviser (docs/risk-reviser.md) against the paper reviser with DDPG, 2 runs per row,
+# The risk reviser (docs/lab/risk-reviser.md) against the paper reviser with DDPG, 2 runs per row,
 # one lockstep group each, in-process shields.
 #   results/scripts/risk-reviser.sh          tuning seeds 4, 5 and 6, 200 episodes a run:
 #                                    results/tuning/risk-reviser/seed-S/ROW, seed-S-activation.md
