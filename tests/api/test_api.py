@@ -1,4 +1,4 @@
-"""The HTTP and WebSocket contract of spec/api.md, in process."""
+"""The HTTP and WebSocket contract of docs/api.md, in process."""
 
 from __future__ import annotations
 

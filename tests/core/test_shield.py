@@ -1,4 +1,5 @@
-"""One step of the shield: the order of spec/api.md, streams, bad input, snapshots, determinism."""
+"""One step of the shield: its order (docs/api.md, "One step"), streams, bad input, snapshots,
+determinism."""
 
 from __future__ import annotations
 

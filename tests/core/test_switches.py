@@ -1,4 +1,5 @@
-"""Every switch of spec/efsm.md §16 changes behaviour where it should: one test each."""
+"""Every switch of the configuration (the paper's gaps, tagged A1-A16 in app/core/config.py)
+changes behaviour where it should: one test each."""
 
 from __future__ import annotations
 
