@@ -339,6 +339,13 @@ class LazyTransitions:
         self._log_decay = stored.floats(data["log_decay"], "transitions.log_decay", (q,),
                                         high=0.0)
         self._created = stored.floats(data["created"], "transitions.created", (q, n))
+        # every scale was -ld_a when it was set, and ld_a only falls: 0 <= scale <= -ld_a now,
+        # and states appeared in order (an offset beyond would make a row's mass infinite)
+        latest = -self._log_decay[:, None] * (1 + 1e-12) + 1e-12
+        if ((self._created < 0) | (self._created > latest)).any() or \
+                (np.diff(self._created, axis=1) < 0).any():
+            raise InvalidSnapshot("a state's creation lies outside the decays so far",
+                                  field="transitions.created")
         self._pad = np.zeros((q, n))
         self._pad_tail = np.zeros((q, n + 1))
         self._rows = np.zeros((6, q, n))
@@ -356,7 +363,8 @@ class LazyTransitions:
             width = stored.integer(entry["width"], f"{field}.width", high=max(2 * n, 8))
             nnz = stored.ints(entry["nnz"], f"{field}.nnz", (n,), high=min(width, n))
             self._nnz[a] = nnz
-            self._offset[a] = stored.floats(entry["offset"], f"{field}.offset", (n,))
+            self._offset[a] = stored.floats(entry["offset"], f"{field}.offset", (n,), low=0.0,
+                                            high=float(latest[a, 0]))
             self._row_sum[a] = stored.floats(entry["row_sum"], f"{field}.row_sum", (n,),
                                              low=0.0)
             total = int(nnz.sum())
