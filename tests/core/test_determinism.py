@@ -54,6 +54,7 @@ def test_no_core_module_uses_arithmetic_whose_last_bits_follow_the_cpu(path: Pat
     assert cpu_dependent_uses(path.read_text()) == []
 
 
+@pytest.mark.slow  # long streams: seconds
 @pytest.mark.parametrize("config", [ShieldConfig(), ShieldConfig.paper()], ids=["risk", "paper"])
 def test_a_restored_model_whose_arrays_lie_elsewhere_decides_as_the_original(
         config: ShieldConfig) -> None:

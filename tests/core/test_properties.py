@@ -93,6 +93,7 @@ def test_tpm_rows_stay_distributions_and_forms_agree(ops_list: list, mode: str,
             np.testing.assert_allclose(probabilities(F[a], F_o[a]), P, atol=1e-12)
 
 
+@pytest.mark.slow  # Hypothesis: seconds
 @given(ops, st.sampled_from(["prior", "zero_uniform", "zero_identity"]),
        st.lists(st.integers(0, 40), max_size=3))
 def test_lazy_scales_kept_per_row_equal_a_fresh_computation(
@@ -132,6 +133,7 @@ def test_the_marginal_step_of_every_action_at_once_is_their_mean_bit_for_bit(
                                    rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.slow  # Hypothesis: seconds
 @given(streams)
 def test_invariants_hold_on_any_stream(steps: list) -> None:  # type: ignore[type-arg]
     shield = Shield(ShieldConfig(limits=LimitsConfig(belief_top_k=4)))
@@ -143,6 +145,7 @@ def test_invariants_hold_on_any_stream(steps: list) -> None:  # type: ignore[typ
     assert sizes == sorted(sizes)
 
 
+@pytest.mark.slow  # Hypothesis: seconds
 @given(streams, streams)
 def test_snapshot_restore_gives_the_same_decisions(first: list, then: list) -> None:  # type: ignore[type-arg]
     shield = Shield(ShieldConfig())
@@ -152,6 +155,7 @@ def test_snapshot_restore_gives_the_same_decisions(first: list, then: list) -> N
     assert_same(restored.snapshot(), shield.snapshot())
 
 
+@pytest.mark.slow  # Hypothesis: seconds
 @given(streams, st.integers(0, 2**32))
 def test_same_seed_same_model(steps: list, seed: int) -> None:  # type: ignore[type-arg]
     config = ShieldConfig.from_dict({"reviser": {"seed": seed, "activate_after_episodes": 0}})
@@ -160,6 +164,7 @@ def test_same_seed_same_model(steps: list, seed: int) -> None:  # type: ignore[t
     assert_same(a.snapshot(), b.snapshot())
 
 
+@pytest.mark.slow  # Hypothesis: seconds
 @given(streams, observation, st.floats(-2, 2))
 def test_learn_false_and_inputs_are_left_untouched(steps: list, z: tuple, a: float) -> None:  # type: ignore[type-arg]
     shield = Shield()

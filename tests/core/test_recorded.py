@@ -16,6 +16,7 @@ from tests.core.recorded import DATA, PRESETS, drive, path, preset
 from tests.utils import assert_same
 
 
+@pytest.mark.slow  # 12,000 steps a preset
 @pytest.mark.parametrize("name", sorted(PRESETS))
 def test_a_long_closed_loop_sequence_decides_as_recorded(name: str) -> None:
     recorded = np.load(path(name))

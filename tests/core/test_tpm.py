@@ -102,6 +102,7 @@ def test_stable_form_growth_matches_counts() -> None:
     assert P_o == pytest.approx(F_o)
 
 
+@pytest.mark.slow  # long streams: seconds
 def test_no_underflow_after_200k_updates() -> None:
     """A row that is never visited again keeps its probabilities in the lazy form."""
     cfg = TransitionConfig(learning_rate=0.01)
@@ -128,6 +129,7 @@ def test_no_underflow_after_200k_updates() -> None:
     assert not np.allclose(literal, once / once.sum())
 
 
+@pytest.mark.slow  # long streams: seconds
 def test_recursive_estimate_converges_to_the_transition_frequencies() -> None:
     true_P = np.array([[0.7, 0.2, 0.1], [0.1, 0.8, 0.1], [0.3, 0.3, 0.4]])
     rng = np.random.default_rng(0)
@@ -203,6 +205,7 @@ def test_the_marginal_step_matches_the_loop_bit_for_bit_at_the_experiments_size(
                                       marginal_by_action(lazy, belief, True))
 
 
+@pytest.mark.slow  # long streams: seconds
 def test_memory_follows_what_was_learned_not_the_widest_row() -> None:
     """One state moves to many; the others to one each. The learned entries share one pool,
     so the wide row does not make every row as wide (a padded n x width layout would hold

@@ -19,6 +19,8 @@ import websocket
 from app.settings import Settings
 from tests.conftest import Server, start_server
 
+pytestmark = pytest.mark.slow  # each test starts a real server
+
 TIMEOUT = 1.0  # [s] the header and body time-outs of the server under test
 LIMIT = 150  # its most connections
 

@@ -4,10 +4,14 @@ idempotency key is applied twice (issue #69): one trial of ``bench/durability.py
 
 from __future__ import annotations
 
+import pytest
+
 from bench.durability import DAMAGE, trial
 
 REPAIRED = {"torn journal (last 40 bytes cut)", "bit-flipped journal (last record)",
             "garbage journal tail (64 bytes)"}
+
+pytestmark = pytest.mark.slow  # real servers killed and restarted
 
 
 def test_every_damaged_file_is_repaired_without_loss_or_set_aside() -> None:

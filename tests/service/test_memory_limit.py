@@ -20,6 +20,8 @@ import pytest
 from tests.api.test_hostile import with_member
 from tests.conftest import start_server
 
+pytestmark = pytest.mark.slow  # starts a real server under prlimit
+
 ADDRESS_SPACE = 2**30  # [bytes]
 SNAPSHOT_LIMIT = 32 * 2**20  # [bytes] the server's max_snapshot_bytes
 

@@ -25,6 +25,8 @@ from client.shield import (
 from tests.conftest import Server, free_port, start_server
 from tests.utils import random_stream
 
+pytestmark = pytest.mark.slow  # each test starts a real server
+
 
 def test_nothing_acknowledged_is_lost_after_kill_9(live_server: Server) -> None:
     acknowledged = 0
