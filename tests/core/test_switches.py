@@ -148,8 +148,8 @@ def test_a6_literal_search_runs_below_the_hardest_braking() -> None:
     actions = {}
     for mode in ("fixed", "literal"):
         shield = shield_with(reviser=paper_reviser(  # type: ignore[arg-type]
-            search=mode, activate_after_episodes=0, noise="std", noise_k=1e9))
-        for _ in range(4):  # four episodes: the noise std is 2 / 4e9, negligible
+            search=mode, activate_after_episodes=0, noise="std", noise_k=1e6))
+        for _ in range(4):  # four episodes: the noise std is 2 / 4e6, negligible
             shield.step([1.0], None, event="collision", done=True)
         decision = shield.step([1.0], 1.0)
         assert [c.bin for c in decision.candidates] == list(range(14, -1, -1))
