@@ -9,7 +9,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from tests.conftest import start_server
+
+pytestmark = pytest.mark.slow  # a real server, TD3 training
 
 README = Path(__file__).resolve().parent.parent / "README.md"
 
