@@ -78,7 +78,7 @@ def start_server(data_dir: Path, *args: str, env: dict[str, str] | None = None,
     process = subprocess.Popen(command, stdout=open(log, "wb"), stderr=subprocess.STDOUT,
                                env={**os.environ, **(env or {})})
     url = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + 120  # a cold kernel cache compiles first: about 15 s
+    deadline = time.monotonic() + 300  # a cold kernel cache compiles first: a minute or more
     while time.monotonic() < deadline:
         if process.poll() is not None:
             raise RuntimeError(f"server exited: {log.read_text()}")
