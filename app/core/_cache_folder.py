@@ -6,7 +6,8 @@ read-only install run by a user without a home, as in a container run as another
 refuses to define a cached kernel at all, and importing the core would fail. :mod:`app.core`
 imports this module first: in that case it points numba at a private folder of the system's
 temporary folder instead, and says so, so that the core still loads (compiling on each start
-that finds that folder empty, about a minute on 2 cores) until a writable ``NUMBA_CACHE_DIR`` is given.
+that finds that folder empty, about a minute on 2 cores) until a writable ``NUMBA_CACHE_DIR``
+is given.
 """
 
 from __future__ import annotations

@@ -4,6 +4,7 @@ with 60 episodes of history, opened afresh, to docs/dashboard.png."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -58,16 +59,25 @@ def feed(url: str, seed: int, steps: int) -> None:
                           stream=f"car-{seed}")
 
 
-def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) -> None:
-    feed(server.url, 0, 150)
+@contextlib.contextmanager
+def live_dashboard(url: str, query: str = "") -> Iterator[tuple[Any, list[str]]]:
+    """The dashboard open in Chromium, once it says it is live: the page, and the errors its
+    console and scripts report."""
     with playwright.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
         page = browser.new_page(viewport={"width": 1280, "height": 1500})
         errors: list[str] = []
         page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
         page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(f"{server.url}/dashboard#token={TOKEN}")
+        page.goto(f"{url}/dashboard{query}#token={TOKEN}")
         page.wait_for_function("document.getElementById('status').textContent.startsWith('live')")
+        yield page, errors
+        browser.close()
+
+
+def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) -> None:
+    feed(server.url, 0, 150)
+    with live_dashboard(server.url) as (page, errors):
 
         with ShieldClient(server.url, token=TOKEN) as shield:
             n = shield.snapshot(tpm="none", exact=False)["n_states"]
@@ -113,7 +123,6 @@ def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) ->
             page.click("#download-npz")
         assert Path(download.value.path()).read_bytes()[:2] == b"PK"  # a zip archive
 
-        browser.close()
     assert errors == []
 
 
@@ -144,14 +153,7 @@ def test_the_history_is_drawn_on_open_with_labelled_axes(server: Server, tmp_pat
     history = history_of(server.url, "history")
     assert history["episodes"] == list(range(1, 61))
 
-    with playwright.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
-        page = browser.new_page(viewport={"width": 1280, "height": 1500})
-        errors: list[str] = []
-        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(f"{server.url}/dashboard?model=history#token={TOKEN}")
-        page.wait_for_function("document.getElementById('status').textContent.startsWith('live')")
+    with live_dashboard(server.url, "?model=history") as (page, errors):
         page.wait_for_function("view.drawn['chart-failures'] && view.drawn.tpm")
 
         # before any new step: the 60 episodes are on the charts, as the model counted them
@@ -194,7 +196,6 @@ def test_the_history_is_drawn_on_open_with_labelled_axes(server: Server, tmp_pat
                         "interventions": {c: v[-1] for c, v in history["interventions"].items()},
                         "failures": {c: v[-1] for c, v in history["failures"].items()}}
         page.wait_for_function("view.drawn['chart-share'].points == 61")
-        browser.close()
     assert errors == []
 
 
