@@ -198,9 +198,10 @@ class EvolvingClusterer:
         if not np.allclose(self.stats[SQ_NORM], norms, rtol=1e-9, atol=1e-12):
             raise InvalidSnapshot("a squared norm is not its centre's",
                                   field="clustering.sq_norms")
-        # P = 1 / (1 + mean squared distance): in (0, 1]
+        # P = 1 / (1 + mean squared distance): in (0, 1], up to the recursion's rounding (a
+        # point seen twice in a row gives 1 + 2^-52)
         self.stats[POTENTIAL] = stored.floats(data["potentials"], "clustering.potentials",
-                                              (n,), low=0.0, high=1.0)
+                                              (n,), low=0.0, high=1.0 + 1e-9)
         self.stats[RADIUS] = stored.floats(data["radii"], "clustering.radii", (n,), low=0.0)
         self.support_counts = stored.ints(data["support"], "clustering.support", (n,), low=1)
         self.stats[SCATTER] = stored.floats(data["scatter"], "clustering.scatter", (n,),

@@ -99,7 +99,8 @@ def test_every_ingress_follows_a_move_made_through_another() -> None:
         first.post("/models", json={"name": name})
         versions = []
         for t, to in enumerate([(home + 1) % 3, (home + 2) % 3, home, (home + 1) % 3]):
-            assert first.post("/shards/move", json={"model": name, "to": to}).status_code == 200
+            r = first.post("/shards/move", json={"model": name, "to": to})
+            assert r.status_code == 200, r.text
             versions.append(second.post(f"/models/{name}/revise", json=step(t)).json()
                             ["model_version"])
             with second.websocket_connect(f"/models/{name}/ws") as ws:

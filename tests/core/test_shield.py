@@ -345,3 +345,15 @@ def test_an_empty_model_has_empty_views_and_snapshots() -> None:
     assert_same(Shield.from_snapshot(shield.snapshot()).snapshot(), shield.snapshot())
     what_if = shield.step([1.0, 2.0, 3.0], 0.5, learn=False)
     assert what_if.reason == "cold_start" and shield.n_states == 0
+
+
+def test_a_model_that_saw_one_point_twice_restores() -> None:
+    """The potential's recursion rounds a repeated point to 1 + 2^-52, just above its bound
+    of 1: the model's own snapshot must still restore."""
+    shield = Shield(ShieldConfig())
+    for _ in range(2):
+        shield.step([10.0, 12.0, 9.0], 0.5, stream="s")
+    assert max(shield.snapshot()["clustering"]["potentials"]) > 1.0
+    restored = Shield.from_snapshot(shield.snapshot())
+    assert restored.step([11.0, 12.0, 9.0], 0.5, stream="s") == \
+        shield.step([11.0, 12.0, 9.0], 0.5, stream="s")
