@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import io
+import zipfile
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -89,3 +92,14 @@ def run_cliff(
             shield.step([x], None, event="collision" if crashed else None, done=True)
         failed.append(crashed)
     return failed, pairs
+
+
+def rewrite_npz_member(npz: bytes, member: str, change: Callable[[bytes], bytes]) -> bytes:
+    """An ``.npz`` snapshot with the bytes of one member replaced by ``change`` of them."""
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(io.BytesIO(npz)) as source, \
+            zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as target:
+        for info in source.infolist():
+            data = source.read(info)
+            target.writestr(info.filename, change(data) if info.filename == member else data)
+    return buffer.getvalue()

@@ -28,6 +28,7 @@ from app.main import create_app
 from app.service import codec
 from app.settings import Settings
 from tests.api.test_api import episode
+from tests.utils import rewrite_npz_member
 
 LIMIT = 8 * 2**20  # the test server's snapshot limit [bytes]
 NPZ = {"content-type": "application/x-npz"}
@@ -350,15 +351,9 @@ def test_a_member_the_format_does_not_name_is_refused_before_it_is_inflated() ->
 
 def test_a_member_whose_size_differs_from_its_header_is_refused(client: TestClient) -> None:
     npz = client.get("/model", params={"format": "npz"}).content
-    buffer = io.BytesIO()
-    with zipfile.ZipFile(io.BytesIO(npz)) as source, \
-            zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as target:
-        for info in source.infolist():
-            data = source.read(info)
-            if info.filename == "/clustering/beta.npy":
-                data += bytes(4096)  # trailing bytes no array holds
-            target.writestr(info.filename, data)
-    r = client.put("/models/trailing", content=buffer.getvalue(), headers=NPZ)
+    trailing = rewrite_npz_member(npz, "/clustering/beta.npy",
+                                  lambda data: data + bytes(4096))  # bytes no array holds
+    r = client.put("/models/trailing", content=trailing, headers=NPZ)
     assert r.status_code == 422 and r.json()["error"]["field"] == "/clustering/beta", r.text
 
 
