@@ -8,6 +8,21 @@ user would write, the simulator's ranges scaled linearly (headway over 200 m, no
 which gives the model few, broad states as the held-out worlds' configurations do. Beside
 them two worlds of other makes: the tank (:mod:`bench.worlds.tank`) and the lander
 (:mod:`bench.worlds.lander`), whose failure builds up over more steps than the horizon.
+
+Three more, one of each kind issue #68 names, of other physics than the held-out worlds of
+those kinds (``bench/heldout``), each with a direction per criterion as a new user would
+configure it and (``_bounded``) with a ``Bound`` per failure as well; each controller was
+calibrated alone to fail in 35-45% of episodes, in both ways its world names:
+
+- ``tuning_dose`` (:mod:`bench.worlds.dose`), a slow failure on either side of one action: an
+  insulin pump whose dose acts 1-3 hours later, ``low`` (less insulin) or ``high`` (more);
+- ``tuning_cartpole`` (:mod:`bench.worlds.cartpole`), unstable, with a saving direction that
+  depends on the state: a cart-pole on a short track, ``fall_right`` / ``fall_left`` (push
+  that way) and ``off_right`` / ``off_left`` (push back);
+- ``tuning_chemostat`` (:mod:`bench.worlds.chemostat`), a runaway and an extinction on either
+  side of an unstable operating point: a cooperatively growing culture held by its dilution
+  rate, ``bloom`` (more dilution) or ``washout`` (less).
+
 Defaults are chosen here (and on the DDPG protocol's tuning seeds), never on the held-out
 worlds beside this module.
 
@@ -22,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from app.core import ObservationSpec, ShieldConfig
-from bench.worlds import lander, tank
+from bench.worlds import cartpole, chemostat, dose, lander, tank
 from bench.worlds.harness import World
 from client.agents.idm import PRESETS, RandomController
 from client.sim import lead as lead_data
@@ -69,6 +84,10 @@ _CONTROLLERS: dict[str, tuple[str, Any]] = {
 }
 
 WORLDS: dict[str, World] = {"tuning_tank": tank.WORLD, "tuning_lander": lander.WORLD}
+for _module in (dose, cartpole, chemostat):
+    _key = _module.__name__.rsplit(".", 1)[-1]
+    WORLDS[f"tuning_{_key}"] = _module.WORLD
+    WORLDS[f"tuning_{_key}_bounded"] = _module.WORLD_BOUNDED
 for _key, (_name, _controller) in _CONTROLLERS.items():
     WORLDS[f"tuning_{_key}"] = _world(f"tuning-{_name}", _controller)
     WORLDS[f"tuning_{_key}_plain"] = _world(f"tuning-{_name}-plain", _controller, PLAIN)
