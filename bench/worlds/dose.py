@@ -38,7 +38,7 @@ The shield observes ``[glucose, insulin on board, insulin action, carbohydrate o
 mmol/L, U in the depots, the action as the U/h that would hold it for the mean person, and g
 in the gut. The controller's task figure (``info["task"]``, per step) is the absolute gap
 between the glucose and 6.5 mmol/L. A tuning world: defaults may be chosen on it
-(bench/worlds/tuning.py); calibrated alone to fail in about 41% of episodes (seeds 0-8).
+(bench/worlds/tuning.py); calibrated alone to fail in about 40% of episodes (seeds 0-8).
 """
 
 from __future__ import annotations
