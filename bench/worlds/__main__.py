@@ -7,6 +7,7 @@ Example::
     python -m bench.worlds --seeds 1000,1001,1002 --episodes 150 --out results/worlds/risk.json
     python -m bench.worlds --overrides '{"reviser": {"method": "paper"}}'
     python -m bench.worlds --worlds tuning --seeds 0,1
+    python -m bench.worlds --worlds highway,highway_too_slow --seeds 0 --episodes 60
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib
+import importlib.util
 import json
 import platform
 from pathlib import Path
@@ -26,12 +28,16 @@ WORLDS = ("braking_lead", "pendulum", "wall", "lane")
 
 def world_named(name: str) -> World:
     """A held-out world by module name, or a tuning world by its name in
-    :data:`bench.worlds.tuning.WORLDS`."""
-    if name.startswith("tuning_"):
+    :data:`bench.worlds.tuning.WORLDS` (``tuning_*``, and highway-env's ``highway*``)."""
+    if name.startswith(("tuning_", "highway")):
         from bench.worlds.tuning import WORLDS as TUNING  # the simulator's lead data, on demand
 
         if name not in TUNING:
             raise SystemExit(f"no tuning world {name!r}; there are {', '.join(TUNING)}")
+        if name.startswith("highway") and importlib.util.find_spec("highway_env") is None:
+            from bench.worlds.highway import INSTALL
+
+            raise SystemExit(f"the world {name!r} needs highway-env: {INSTALL}")
         return TUNING[name]
     if name not in WORLDS:
         raise SystemExit(f"no held-out world {name!r}; there are {', '.join(WORLDS)}")
@@ -63,7 +69,7 @@ def main() -> None:
     if names == ["tuning"]:
         from bench.worlds.tuning import WORLDS as TUNING
 
-        names = list(TUNING)
+        names = [name for name in TUNING if name.startswith("tuning_")]  # not highway-env's
     for name in names:
         world = world_named(name)
         config = merged(world.config, overrides)

@@ -24,6 +24,11 @@ world names:
   side of an unstable operating point: a cooperatively growing culture held by its dilution
   rate, ``bloom`` (more dilution) or ``washout`` (less).
 
+Two of a public benchmark, for tuning and demonstration: ``highway`` and ``highway_too_slow``
+(:mod:`bench.worlds.highway`), Farama's highway-env with the acceleration as the action, as
+#68 measured it; they need the optional extra ``highway`` (highway-env), which only running
+them asks for, and ``--worlds tuning`` leaves them out.
+
 Defaults are chosen here (and on the DDPG protocol's tuning seeds), never on the held-out
 worlds beside this module.
 
@@ -38,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from app.core import ObservationSpec, ShieldConfig
-from bench.worlds import cartpole, chemostat, dose, lander, tank
+from bench.worlds import cartpole, chemostat, dose, highway, lander, tank
 from bench.worlds.harness import World
 from client.agents.idm import PRESETS, RandomController
 from client.sim import lead as lead_data
@@ -92,3 +97,6 @@ for _module in (dose, cartpole, chemostat):
 for _key, (_name, _controller) in _CONTROLLERS.items():
     WORLDS[f"tuning_{_key}"] = _world(f"tuning-{_name}", _controller)
     WORLDS[f"tuning_{_key}_plain"] = _world(f"tuning-{_name}-plain", _controller, PLAIN)
+# highway-env's worlds: built without it (it is imported when one is run), not in "tuning"
+WORLDS["highway"] = highway.WORLD
+WORLDS["highway_too_slow"] = highway.WORLD_TOO_SLOW
