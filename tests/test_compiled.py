@@ -61,8 +61,8 @@ LIMIT = ("from app.core import Shield, compiled; "
 
 def test_an_edited_callee_reaches_its_cached_caller(tmp_path: Path) -> None:
     """A copy of the package, its cache warm; then only ``risk.py`` changes (the limit of
-    the risk an action may carry, made huge). ``step.learn_and_decide``, whose module did not
-    change, must run the new ``risk.kept_limit``: numba alone would load it from the cache
+    the total risk of every action, made huge). ``step.learn_and_decide``, whose module did not
+    change, must run the new ``risk.total_risk``: numba alone would load it from the cache
     with the old one inside."""
     shutil.copytree(ROOT / "app", tmp_path / "app",
                     ignore=shutil.ignore_patterns("__pycache__"))
@@ -76,8 +76,8 @@ def test_an_edited_callee_reaches_its_cached_caller(tmp_path: Path) -> None:
     assert limit() <= 1.0
     risk = tmp_path / "app" / "core" / "risk.py"
     source = risk.read_text()
-    assert "return max(threshold, least + margin)" in source
-    risk.write_text(source.replace("return max(threshold, least + margin)", "return 1e300"))
+    assert "total[a] = 1.0 - spared" in source
+    risk.write_text(source.replace("total[a] = 1.0 - spared", "total[a] = 1e300"))
     assert limit() == 1e300
 
 
@@ -113,12 +113,12 @@ def test_with_no_folder_numba_can_cache_in_the_core_loads_and_caches_in_a_tempor
     env = {key: value for key, value in os.environ.items() if key != "NUMBA_CACHE_DIR"}
     env |= {"NUMBA_CACHE_LOCATOR_CLASSES": "UserProvidedCacheLocator", "TMPDIR": str(tmp_path)}
     code = ("import numpy as np; from app.core import risk; "
-            "print(risk.kept_limit(np.array([0.25, 0.5]), 0.1, 0.5))")
+            "t = np.empty(1); risk.total_risk(np.array([[0.5, 0.5]]), t); print(t[0])")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True,
                           text=True, timeout=300, check=True)
     assert done.stdout.split() == ["0.75"]
     assert "no folder it can write" in done.stderr
-    assert any((tmp_path / f"efsm-numba-{os.getuid()}").rglob("risk.kept_limit-*.nbi"))
+    assert any((tmp_path / f"efsm-numba-{os.getuid()}").rglob("risk.total_risk-*.nbi"))
 
 
 def test_the_temporary_cache_folder_is_one_only_its_user_may_write(tmp_path: Path) -> None:

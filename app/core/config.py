@@ -26,7 +26,7 @@ from typing import Any, Literal, TypeVar, get_args, get_origin, get_type_hints
 
 from app.core.errors import InvalidConfig
 
-Direction = Literal["decrease", "increase"]
+Direction = Literal["decrease", "increase", None]  # None: none known
 
 MAX_PHYSICAL = 1e12  # [observation / action units] largest bound, as for observations
 MIN_SPAN = 1e-6  # [same units] narrowest range high - low that a dimension or feature spans
@@ -196,20 +196,26 @@ class Bound:
 
 @dataclass(frozen=True)
 class Criterion:
-    """An unfavourable-state criterion: its name, where the reviser searches against it, and
-    where its failures lie, if known (:class:`Bound`)."""
+    """An unfavourable-state criterion: its name, the direction of the action that moves away
+    from it where the user knows one, and where its failures lie, if known (:class:`Bound`).
+
+    A direction is a prior (:func:`app.core.risk.monotone`): ``decrease`` when a smaller
+    action never raises the risk (braking against a collision), ``increase`` when a larger one
+    never does, None when it depends on the state (an unstable system, where the action that
+    saves it from a fall depends on which way it leans): the risk reviser then learns each
+    action's risk as it is. The paper's reviser needs a direction."""
 
     name: str
-    direction: Direction
+    direction: Direction = None
     bound: Bound | None = None
 
     def __post_init__(self) -> None:
         _check_name(self.name, "name")
         _check(self.name != "ok", "name", "'ok' is reserved for the favourable verdict")
         _check(
-            self.direction in ("decrease", "increase"),
+            self.direction in ("decrease", "increase", None),
             "direction",
-            "direction is 'decrease' or 'increase'",
+            "direction is 'decrease', 'increase' or null (none known)",
         )
 
 
@@ -384,6 +390,9 @@ class ShieldConfig:
         _check(len(set(names)) == len(names), "criteria", "criterion names must be unique")
         observed = self.observation.names
         for i, criterion in enumerate(self.criteria):
+            _check(criterion.direction is not None or self.reviser.method == "risk",
+                   f"criteria.{i}.direction", "the paper's reviser searches along a "
+                   "direction: declare one, or use the risk reviser")
             if criterion.bound is None:
                 continue
             _check(criterion.bound.observation in observed, f"criteria.{i}.bound.observation",

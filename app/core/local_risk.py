@@ -32,14 +32,16 @@ one way at a place, the shield tries the safer ways there; a confound learned at
 other end (firing the engine goes with crashing, because it is fired too late) does not hold
 it back.
 
-**Monotone prior.** Each criterion's direction gives the safe side (braking never raises the
+**Monotone prior.** A criterion's direction gives the safe side (braking never raises the
 risk of a collision), so the risks over the action bins are lifted to their running maximum
-from the safe end (:func:`app.core.risk.monotone`).
+from the safe end (:func:`app.core.risk.monotone`). A criterion declared without a direction
+has no safe side: a bin never tried in a state takes the risk of the nearest bin tried there,
+and the box rule above does not apply.
 
 **Reach.** Beside the risk, the model learns each state's dynamics and where failures were seen
 (:mod:`app.core.reach`): whether a failure can still be avoided after an action under the safest
 continuation, which the behaviour's confounds cannot hide. The decision asks both
-(:func:`app.core.risk.decide_with_reach`).
+(:func:`app.core.risk.decide`).
 """
 
 from __future__ import annotations
@@ -217,9 +219,9 @@ class LocalRisk:
                margin: float, safe: IntArray, by_bin: FloatArray, verdicts: IntArray
                ) -> tuple[float, int, int, bool]:
         """The risk reviser's decision on a proposal at ``z``
-        (:func:`app.core.risk.decide_with_reach`): ``by_bin`` gets each action's risk, the
-        larger of the local model's (:meth:`read`, then the monotone prior) and the reach's,
-        and ``verdicts`` each bin's verdict; one compiled call."""
+        (:func:`app.core.risk.decide`): ``by_bin`` gets each action's risk per criterion, the
+        blend of the local model's (:meth:`read`) and the reach's, each under the monotone
+        prior, and ``verdicts`` each bin's verdict; one compiled call."""
         return decide_step(self._theta, self._tried, self._low, self._high, belief.index,
                            belief.prob, z, self.midpoints, safe, proposed_bin, threshold,
                            margin, by_bin, verdicts, self._dynamics, self._peak,
@@ -447,6 +449,9 @@ def _read(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
             base = theta[i, c, 0]
             for r in range(d):
                 base += theta[i, c, r + 1] * z[r]
+            if safe[c] == 0:
+                _read_undirected(theta, tried, i, c, base, midpoints, prob[t], out)
+                continue
             first, last, way = (0, q, 1) if safe[c] < 0 else (q - 1, -1, -1)
             # the safest bin applied near z: before it, nothing counts (none applied: all do)
             safest = first if highest < 0 else (lowest if safe[c] < 0 else highest)
@@ -459,6 +464,24 @@ def _read(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
 
 
 @njit(cache=True)
+def _read_undirected(theta: FloatArray, tried: IntArray, i: int, c: int, base: float,
+                     midpoints: FloatArray, weight: float, out: FloatArray) -> None:
+    """A criterion without a direction in state ``i``: its model on the bins tried there, the
+    nearest tried bin's risk on the others (the riskier of two equally near), none where no
+    bin was tried; added to ``out`` with ``weight``."""
+    q, d = midpoints.shape[0], theta.shape[2] - 2
+    for a in range(q):
+        best, value = q, 0.0
+        for b in range(q):
+            if tried[i, b] == 0 or abs(b - a) > best:
+                continue
+            risk_b = min(max(base + theta[i, c, d + 1] * midpoints[b], 0.0), 1.0)
+            if abs(b - a) < best or risk_b > value:
+                best, value = abs(b - a), risk_b
+        out[a, c] += weight * value
+
+
+@njit(cache=True)
 def decide_step(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
                 index: IntArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
                 safe: IntArray, proposed_bin: int, threshold: float, margin: float,
@@ -468,7 +491,7 @@ def decide_step(theta: FloatArray, tried: IntArray, low: FloatArray, high: Float
                 reach_radius: float) -> tuple[float, int, int, bool]:
     """:meth:`LocalRisk.decide` on its arrays: :func:`_read` and the reach
     (:func:`app.core.reach.risk`), each under the monotone prior, and the decision on both
-    (:func:`app.core.risk.decide_with_reach`)."""
+    (:func:`app.core.risk.decide`)."""
     _read(theta, tried, low, high, index, prob, z, midpoints, safe, by_bin)
     risk.monotone(by_bin, safe)
     reached = np.zeros(by_bin.shape)
@@ -476,5 +499,5 @@ def decide_step(theta: FloatArray, tried: IntArray, low: FloatArray, high: Float
         reach.risk(dynamics, peak, extent, index, prob, z, midpoints, safe, points,
                    point_counts, bounds, reach_horizon, reach_radius, reached)
         risk.monotone(reached, safe)
-    return risk.decide_with_reach(by_bin, reached, proposed_bin, threshold, margin, safe,
-                                  verdicts)
+    return risk.decide(by_bin, reached, reach_horizon > 0, proposed_bin, threshold, margin,
+                       verdicts)

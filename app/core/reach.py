@@ -34,7 +34,8 @@ interpolated within its step, so that actions stay apart where no action avoids 
 
 **Reach.** For an action bin a and criterion c the belief's models are blended into one at the
 current observation and rolled out for ``horizon`` steps: the first step under a, every later
-one under c's safest bin (its safe end of the action range). The risk is the largest closeness
+one under c's safest bin (its safe end of the action range; the range's middle for a criterion
+declared without a direction). The risk is the largest closeness
 of the path to c's failures, ``max_t max(0, 1 - distance(z_t, failures_c) / radius)``: 1 on a
 path through a seen failure, 0 on one that stays ``radius`` away from all of them. The rolled-out
 model is affine, so every bin's path is ``p_t + q_t u_a`` from one rollout per criterion.
@@ -161,7 +162,8 @@ def risk(dynamics: FloatArray, peak: FloatArray, extent: FloatArray, index: IntA
     for c in range(safe.shape[0]):
         kept, b = counts[c, 0], int(bounds[c, 0])
         out[:, c] = 0.0
-        u_safe = midpoints[0 if safe[c] < 0 else q - 1]
+        # the continuation: the safe end of the range, or its middle without a direction
+        u_safe = (u_low if safe[c] < 0 else u_high) if safe[c] != 0 else 0.5 * (u_low + u_high)
         if b >= 0:
             crossings(model, peak, extent, z, midpoints, u_safe, b, bounds[c, 1], bounds[c, 2],
                       horizon, when)

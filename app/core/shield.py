@@ -36,6 +36,8 @@ from app.core.lazy_tpm import LazyTransitions
 from app.core.local_risk import LocalRisk
 from app.core.observation import ObservationSpace
 from app.core.observation import check as check_observation
+from app.core.record import COLUMNS as RECORD_COLUMNS
+from app.core.record import PASSED, REVISED, Record
 from app.core.step import learn_and_decide, observe
 from app.core.tpm import DenseTransitions, TransitionModel
 
@@ -242,6 +244,7 @@ class Shield:
         self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria),
                                 cfg.reviser.flag_min_rate)
         self.local_risk = self._new_local_risk()
+        self.record = Record(self._record_window())
         self.streams: dict[str, StreamState] = {}  # least recently stepped first
         self._free_slots: list[int] = []  # slots of streams that ended, reused first
         self._model_arrays: tuple[Any, ...] = ()  # see _arrays
@@ -259,6 +262,11 @@ class Shield:
                          cfg.risk.horizon, cfg.limits.max_states, cfg.limits.belief_top_k,
                          cfg.limits.max_streams, cfg.risk.reach_horizon, cfg.risk.reach_radius,
                          self._bounds())
+
+    def _record_window(self) -> int:
+        """The steps within which a failure counts against a decision in the shield's own
+        record (:mod:`app.core.record`): the farther of the risk's horizon and the reach's."""
+        return max(self.config.risk.horizon, self.config.risk.reach_horizon)
 
     def _bounds(self) -> FloatArray:
         """The criteria's bounds in the clustering space (:func:`app.core.reach.no_bounds`'s
@@ -417,6 +425,8 @@ class Shield:
             self.transitions.reset_row(at)  # A16
         belief = Belief(index, prob) if m == size else Belief(index[:m], prob[:m])
         state = self._stream(step.stream)
+        if self._by_risk and (step.event is not None or step.done):
+            self.record.settle(step.stream, step.event is not None)
         decide = self._by_risk and not step.done
         by_bin, verdicts = _NO_RISKS, _NO_VERDICTS
         if decide:
@@ -455,6 +465,8 @@ class Shield:
         else:
             state.applied_bin = actions.encode(decision.action, cfg.action)
         state.step += 1
+        if self._by_risk:
+            self.record.note(step.stream, recognised, decision.action != step.action)
         if decision.revised and not decision.shadow:
             self.counters.interventions[decision.verdict] += 1
         return decision
@@ -536,6 +548,7 @@ class Shield:
         slot = self.streams.pop(name).slot
         if self.local_risk is not None:
             self.local_risk.forget(slot)
+        self.record.forget(name)
         self._free_slots.append(slot)
 
     def _add_state(self) -> None:
@@ -544,6 +557,7 @@ class Shield:
         self.flags.add_state()
         if self.local_risk is not None:
             self.local_risk.add_state()
+            self.record.add_state()
 
     def _arrays(self) -> tuple[Any, ...]:
         """The settings and arrays :func:`~app.core.step.learn_and_decide` takes before the
@@ -709,6 +723,9 @@ class Shield:
                 reason = "inactive"
             elif kept:
                 reason = "pass"
+            elif self.record.backs_off(recognised):
+                # its revisions here were followed by more failures than the proposals
+                suggested, reason = self._bin_actions[final], "backed_off"
             else:
                 way = 1 if final > start else -1
                 candidates = RiskCandidates(range(start + way, final + way, way), by_bin,
@@ -741,7 +758,23 @@ class Shield:
             "entries": self.flags.entries.copy(),
             "failures": self.flags.failures.copy(),
             "support": self.clusterer.support,
+            "record": self._record_counts(),
+            "backed_off": self._backed_off(),
         }
+
+    def _record_counts(self) -> npt.NDArray[np.int64]:
+        """The shield's own record per state (:data:`app.core.record.COLUMNS`): zeros for the
+        paper's reviser, which keeps none."""
+        if self.local_risk is None:
+            return np.zeros((self.n_states, len(RECORD_COLUMNS)), dtype=np.int64)
+        return self.record.counts.copy()
+
+    def _backed_off(self) -> npt.NDArray[np.bool_]:
+        """Per state, whether the risk reviser passes proposals there because its revisions
+        were followed by more failures than the proposals (:mod:`app.core.record`)."""
+        if self.local_risk is None:
+            return np.zeros(self.n_states, dtype=bool)
+        return self.record.backed_off()
 
     def failure_points(self) -> dict[str, FloatArray]:
         """Per criterion, the observations (physical units) where the reach keeps its
@@ -754,7 +787,7 @@ class Shield:
 
     def state_view(self, index: int) -> dict[str, Any]:
         """One state: centre in physical units, spread, flag, visits, entries, failures by
-        criterion."""
+        criterion, and the shield's own record there (:mod:`app.core.record`)."""
         names = [None] + [c.name for c in self.config.criteria]
         failures = self.flags.failures[index]
         return {
@@ -766,6 +799,9 @@ class Shield:
             "entries": int(self.flags.entries[index]),
             "failures": {c.name: int(f) for c, f in zip(self.config.criteria, failures,
                                                          strict=True)},
+            "record": dict(zip(RECORD_COLUMNS, self._record_counts()[index].tolist(),
+                               strict=True)),
+            "backed_off": bool(self._backed_off()[index]),
         }
 
     def _totals(self) -> list[int]:
@@ -821,6 +857,7 @@ class Shield:
             "flags": self.flags.snapshot(),
             "local_risk": None if self.local_risk is None else self.local_risk.snapshot(
                 {name: s.slot for name, s in self.streams.items()}),
+            "record": None if self.local_risk is None else self.record.snapshot(),
             "streams": {
                 name: {
                     "index": None if s.belief is None else s.belief.index.copy(),
@@ -930,6 +967,8 @@ class Shield:
         if self.local_risk is not None:
             parts.append(("local_risk.tried", total(self.local_risk.tried), steps))
             parts.append(("local_risk.failures", total(self.local_risk.failures), steps))
+            parts.append(("record.counts",
+                          total(self.record.counts[:, [REVISED, PASSED]]), steps))
         for field_name, count, most in parts:
             if count > most:
                 raise InvalidSnapshot(f"{count:.0f} counted, more than the {most} learning "
@@ -989,3 +1028,5 @@ class Shield:
         if self.local_risk is not None:
             slots = {name: s.slot for name, s in self.streams.items()}
             self.local_risk = LocalRisk.restore(self.local_risk, n, slots, data["local_risk"])
+            self.record = Record.restore(self._record_window(), n, self.streams,
+                                         data.get("record"))

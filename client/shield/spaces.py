@@ -67,7 +67,8 @@ def own_config(env: AnyEnv) -> ShieldConfig | None:
     return own() if callable(own) else None
 
 
-def config_for(env: AnyEnv, criteria: Mapping[str, str | tuple[str, Bound]] | None = None, *,
+def config_for(env: AnyEnv,
+               criteria: Mapping[str, str | None | tuple[str | None, Bound]] | None = None, *,
                bins: int = DEFAULT_BINS, low: Sequence[float] | None = None,
                high: Sequence[float] | None = None, observations: npt.ArrayLike | None = None,
                base: ShieldConfig | None = None) -> ShieldConfig:
@@ -76,7 +77,8 @@ def config_for(env: AnyEnv, criteria: Mapping[str, str | tuple[str, Bound]] | No
     An environment that knows its shield (a ``shield_config()`` method on the unwrapped
     environment, as ``CarFollowing-v0`` has) gives its own. Otherwise the action range is cut
     into ``bins`` bins, and ``criteria`` names each failure with the direction of the action
-    that moves away from it: ``{"crash": "decrease"}`` (slower is safer), and, where a failure
+    that moves away from it: ``{"crash": "decrease"}`` (slower is safer), or None where that
+    depends on the state (``{"fall": None}``: the shield learns it), and, where a failure
     is one observation number crossing a value, where it fails:
     ``{"crash": ("decrease", Bound("x0", below=0.0))}`` (the observation's numbers are named
     ``x0``, ``x1``, ...). Everything else is ``base`` (default: the shield's defaults).
@@ -135,7 +137,7 @@ def config_for(env: AnyEnv, criteria: Mapping[str, str | tuple[str, Bound]] | No
                                     low=tuple(lows.tolist()), high=tuple(highs.tolist()),
                                     knee=()),
         action=ActionSpec(low=a_low, high=a_high, step=(a_high - a_low) / bins),
-        criteria=tuple(Criterion(name, *((how,) if isinstance(how, str) else how))
+        criteria=tuple(Criterion(name, *(how if isinstance(how, tuple) else (how,)))
                        for name, how in criteria.items()),
     )
 

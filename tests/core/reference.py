@@ -50,25 +50,32 @@ def pairwise_sum(x: Sequence[float] | FloatArray) -> float:
     return pairwise_sum(values[:half]) + pairwise_sum(values[half:])
 
 
-def monotone(q_table: FloatArray, directions: Sequence[str]) -> FloatArray:
-    """The running maximum of each criterion's risk from its safe end of the action range."""
-    out = np.empty_like(q_table)
+def monotone(q_table: FloatArray, directions: Sequence[str | None]) -> FloatArray:
+    """The running maximum of each criterion's risk from its safe end of the action range
+    (a criterion without a direction as it is)."""
+    out = q_table.copy()
     for c, direction in enumerate(directions):
         if direction == "decrease":
             np.maximum.accumulate(q_table[:, :, c], axis=1, out=out[:, :, c])
-        else:
+        elif direction == "increase":
             out[:, ::-1, c] = np.maximum.accumulate(q_table[:, ::-1, c], axis=1)
     return out
 
 
-def choose(total: FloatArray, proposed_bin: int, limit: float, safe_step: int) -> int:
-    """The proposal when within the limit, else the nearest allowed bin, ties to the safe
-    side."""
-    if total[proposed_bin] <= limit:
-        return proposed_bin
+def decide(local: FloatArray, reached: FloatArray | None, proposed_bin: int, threshold: float,
+           margin: float) -> tuple[float, int, int]:
+    """The decision on one table: each criterion's risk the mean of the local model's and
+    the reach's (the local alone without the reach), the total ``1 - prod(1 - risk)``; the
+    limit the threshold or the least total plus the margin; the proposal when within it,
+    else the nearest bin within it, the less risky of two equally near. Returns the limit, the
+    proposal's verdict (-1: within the limit) and the bin to apply."""
+    risks = local if reached is None else (local + reached) / 2
+    total = 1 - np.prod(1 - np.clip(risks, 0, 1), axis=1)
+    limit = max(threshold, float(total.min()) + margin)
+    verdict = -1 if total[proposed_bin] <= limit else int(risks[proposed_bin].argmax())
     allowed = np.flatnonzero(total <= limit)
-    distance = np.abs(allowed - proposed_bin) * 2 - (np.sign(allowed - proposed_bin) == safe_step)
-    return int(allowed[int(distance.argmin())])
+    order = np.lexsort((total[allowed], np.abs(allowed - proposed_bin)))
+    return limit, verdict, int(allowed[order[0]])
 
 
 def recognise(sq_distances: FloatArray, variances: FloatArray,

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.core import InvalidConfig, InvalidSnapshot, Shield, ShieldConfig, reach, risk
+from app.core import InvalidConfig, InvalidSnapshot, Shield, ShieldConfig, reach
 from app.core.local_risk import PRIOR_COV
 from tests.core import reference
 from tests.core.test_risk import crash_world
@@ -167,62 +167,6 @@ def test_failure_points_near_a_kept_one_add_nothing_and_the_oldest_goes_when_ful
         reach.add_failure(points, counts, 0, np.array([float(k)]), 0.1)
     assert counts.tolist() == [[reach.MAX_POINTS, 1]]
     assert points[0, 0, 0] == reach.MAX_POINTS  # the first point was the oldest
-
-
-def test_without_a_reach_risk_the_decision_is_the_local_models() -> None:
-    rng = np.random.default_rng(3)
-    for _ in range(200):
-        q, proposed = 9, int(rng.integers(9))
-        by_bin = rng.uniform(0, 0.02, (q, 2)) * (rng.random((q, 2)) < 0.5)
-        risk.monotone(by_bin, SAFE)
-        alone, verdicts_alone = by_bin.copy(), np.empty(q, dtype=np.int64)
-        verdicts = np.empty(q, dtype=np.int64)
-        expected = risk.decide(alone, proposed, 0.0, 0.001, SAFE, verdicts_alone)
-        got = risk.decide_with_reach(by_bin, np.zeros((q, 2)), proposed, 0.0, 0.001, SAFE,
-                                     verdicts)
-        assert got == expected and np.array_equal(verdicts, verdicts_alone)
-        assert np.array_equal(by_bin, alone)
-
-
-def test_the_reach_overrules_a_local_model_that_reads_every_action_alike() -> None:
-    q = 5
-    by_bin = np.full((q, 2), 0.0)
-    by_bin[:, 0] = 0.3  # the confound: every action reads the same collision risk
-    reached = np.zeros((q, 2))
-    reached[2:, 0] = 1.0  # from bin 2 on, braking afterwards comes too late
-    verdicts = np.empty(q, dtype=np.int64)
-    limit, worst, final, kept = risk.decide_with_reach(by_bin, reached, 4, 0.0, 0.001, SAFE,
-                                                       verdicts)
-    assert (final, kept, worst) == (1, False, 0)  # the fastest bin the reach allows
-    assert verdicts.tolist() == [-1, -1, 0, 0, 0] and limit == pytest.approx(0.001)
-    assert by_bin[4, 0] == 1.0 and by_bin[0, 0] == 0.3  # the record shows the larger
-
-
-def test_where_both_allow_bins_the_local_model_narrows_the_reachs_choice() -> None:
-    q = 5
-    by_bin = np.zeros((q, 2))
-    by_bin[1:, 0] = 0.4  # the local model allows only the slowest bin
-    reached = np.zeros((q, 2))
-    reached[3:, 0] = 1.0
-    verdicts = np.empty(q, dtype=np.int64)
-    _, _, final, kept = risk.decide_with_reach(by_bin, reached, 4, 0.0, 0.001, SAFE, verdicts)
-    assert (final, kept) == (0, False) and verdicts.tolist() == [-1, 0, 0, 0, 0]
-
-
-@pytest.mark.parametrize(("proposed", "expected"), [(1, (0, False, 0)), (4, (0, False, 0)),
-                                                   (0, (0, True, -1))])
-def test_where_no_bin_avoids_the_failure_the_safest_allowed_bin_applies(
-        proposed: int, expected: tuple[int, bool, int]) -> None:
-    # every path crosses the bound; bins 0 and 1 within the margin of the latest crossing:
-    # the one furthest to the safe side applies, even where the proposal (1) is allowed
-    q = 5
-    by_bin, reached = np.zeros((q, 2)), np.zeros((q, 2))
-    reached[:, 0] = [0.5, 0.5005, 0.52, 0.6, 0.7]
-    verdicts = np.empty(q, dtype=np.int64)
-    _, worst, final, kept = risk.decide_with_reach(by_bin, reached, proposed, 0.0, 0.001, SAFE,
-                                                   verdicts)
-    assert (final, kept, worst) == expected
-    assert verdicts.tolist() == [-1, -1, 0, 0, 0]
 
 
 def test_a_shield_learns_dynamics_and_failure_points_and_snapshots_them() -> None:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from app.core import InvalidConfig, Shield, ShieldConfig
-from app.core.risk import choose, decide, kept_limit, monotone, safe_steps
+from app.core.risk import decide, monotone, safe_steps
 from tests.core import reference
 
 RISK = {"method": "risk"}
@@ -29,37 +29,74 @@ def test_the_compiled_monotone_prior_gives_the_numpy_reading(seed: int) -> None:
     np.testing.assert_array_equal(by_bin, expected)
 
 
-def test_choose_keeps_a_safe_proposal_and_otherwise_the_nearest_allowed() -> None:
-    def pick(total: list[float], proposed: int, safe_step: int) -> int:
-        risks = np.array(total)
-        return choose(risks, proposed, kept_limit(risks, 0.05, 0.02), safe_step)
-
-    total = [0.0, 0.01, 0.03, 0.3, 0.6]
-    assert pick(total, 2, -1) == 2  # under the threshold
-    assert pick(total, 4, -1) == 2  # nearest under the threshold
-    assert pick([0.5, 0.51, 0.9], 1, -1) == 1  # within the margin
-    assert pick([0.0, 0.9, 0.0], 1, -1) == 0  # tie: the safe side
-    assert pick([0.0, 0.9, 0.0], 1, 1) == 2
+def test_a_criterion_without_a_direction_keeps_its_risks_as_learned() -> None:
+    by_bin = np.array([[0.3], [0.0], [0.2]])
+    monotone(by_bin, safe_steps([None]))
+    assert by_bin[:, 0].tolist() == [0.3, 0.0, 0.2]
 
 
-@pytest.mark.parametrize("seed", range(20))
-def test_choose_gives_the_numpy_reading(seed: int) -> None:
+def verdicts_of(by_bin: np.ndarray, reached: np.ndarray | None, proposed: int,
+                threshold: float = 0.0, margin: float = 0.001) -> tuple[float, int, int, bool]:
+    verdicts = np.empty(by_bin.shape[0], dtype=np.int64)
+    return decide(by_bin.copy(), np.zeros_like(by_bin) if reached is None else reached,
+                  reached is not None, proposed, threshold, margin, verdicts)
+
+
+def test_the_decision_reads_the_total_risk_of_every_criterion_together() -> None:
+    # bin 0 risks one failure, bin 2 another, bin 1 a little of both: bin 1 is the safest in
+    # total (1 - 0.9 * 0.9 = 0.19 against 0.3), whatever criterion the proposal risks most
+    by_bin = np.array([[0.3, 0.0], [0.1, 0.1], [0.0, 0.3]])
+    limit, worst, final, kept = verdicts_of(by_bin, None, 2)
+    assert (worst, final, kept) == (1, 1, False) and limit == pytest.approx(0.19 + 0.001)
+    assert verdicts_of(by_bin, None, 1)[2:] == (1, True)
+
+
+def test_a_proposal_within_the_margin_of_the_least_risk_is_kept() -> None:
+    by_bin = np.array([[0.50], [0.52], [0.7]])
+    assert verdicts_of(by_bin, None, 1, margin=0.05)[2:] == (1, True)
+    assert verdicts_of(by_bin, None, 2, margin=0.05)[2:] == (1, False)  # the nearest allowed
+    assert verdicts_of(by_bin, None, 2, threshold=0.8)[2:] == (2, True)  # under the threshold
+
+
+def test_where_no_action_is_safe_the_least_risky_nearest_applies_never_an_extreme_by_rule(
+        ) -> None:
+    # every action risks a failure; the least (bin 2) is in the middle, not at an end
+    by_bin = np.array([[0.9, 0.0], [0.0, 0.7], [0.4, 0.0], [0.8, 0.0], [0.95, 0.0]])
+    assert verdicts_of(by_bin, None, 4)[2:] == (2, False)
+    assert verdicts_of(by_bin, None, 0)[2:] == (2, False)
+
+
+def test_of_two_allowed_bins_equally_near_the_less_risky_applies() -> None:
+    by_bin = np.array([[0.02], [0.9], [0.0]])
+    assert verdicts_of(by_bin, None, 1, margin=0.05)[2] == 2
+    by_bin = np.array([[0.0], [0.9], [0.02]])
+    assert verdicts_of(by_bin, None, 1, margin=0.05)[2] == 0
+
+
+def test_the_reach_blends_with_the_local_risk_neither_outranking_the_other() -> None:
+    # the local model reads every action alike (a confound); the reach tells them apart
+    by_bin = np.full((5, 1), 0.3)
+    reached = np.zeros((5, 1))
+    reached[2:, 0] = 1.0
+    verdicts = np.empty(5, dtype=np.int64)
+    blended = by_bin.copy()
+    limit, worst, final, kept = decide(blended, reached, True, 4, 0.0, 0.001, verdicts)
+    assert (worst, final, kept) == (0, 1, False) and verdicts.tolist() == [-1, -1, 0, 0, 0]
+    assert blended[:, 0].tolist() == [0.15, 0.15, 0.65, 0.65, 0.65]  # what the record shows
+    # and where the local model has learned a failure the reach misses, it still counts
+    local = np.array([[0.0], [0.0], [0.8]])
+    assert verdicts_of(local, np.zeros((3, 1)), 2)[2:] == (1, False)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_the_compiled_decision_gives_the_numpy_reading(seed: int) -> None:
     rng = np.random.default_rng(seed)
-    total = rng.choice([0.0, 0.01, 0.2, 0.5], size=9)
-    proposed, step = int(rng.integers(9)), int(rng.choice([-1, 1]))
-    limit = kept_limit(total, 0.0, 0.001)
-    assert choose(total, proposed, limit, step) == reference.choose(total, proposed, limit, step)
-
-
-def test_decide_gives_verdicts_and_chooses_on_the_safe_side() -> None:
-    by_bin = np.array([[0.0, 0.15], [0.0, 0.0], [0.6, 0.0]])  # braking falls behind, ...
-    verdicts = np.empty(3, dtype=np.int64)
-    limit, worst, final, kept = decide(by_bin, 2, 0.0, 0.001, safe_steps(
-        ["decrease", "increase"]), verdicts)
-    assert limit == pytest.approx(0.001) and worst == 0 and final == 1 and not kept
-    assert verdicts.tolist() == [1, -1, 0]  # falling behind, within the limit, collision
-    assert decide(by_bin, 1, 0.0, 0.001, safe_steps(["decrease", "increase"]),
-                  verdicts)[2:] == (1, True)
+    by_bin = rng.choice([0.0, 0.01, 0.2, 0.5, 1.0], size=(9, 2))
+    reached = rng.choice([0.0, 0.3, 0.9], size=(9, 2)) if seed % 2 else None
+    proposed, margin = int(rng.integers(9)), float(rng.choice([0.001, 0.05]))
+    limit, worst, final, _ = verdicts_of(by_bin, reached, proposed, margin=margin)
+    expected = reference.decide(by_bin, reached, proposed, 0.0, margin)
+    assert (worst, final) == expected[1:] and limit == pytest.approx(expected[0], abs=1e-15)
 
 
 def crash_world(shield: Shield, episodes: int, seed: int) -> int:
@@ -176,3 +213,21 @@ def test_the_paper_reviser_keeps_no_risk_model() -> None:
     shield = Shield(ShieldConfig.paper())
     crash_world(shield, 5, seed=5)
     assert shield.local_risk is None and shield.snapshot()["local_risk"] is None
+
+
+def test_a_criterion_declared_without_a_direction_learns_which_actions_fail() -> None:
+    config = ShieldConfig.from_dict({"criteria": [{"name": "collision", "direction": None}],
+                                     "reviser": {**RISK, "activate_after_episodes": 20}})
+    assert config.criteria[0].direction is None
+    shield = Shield(config)
+    crash_world(shield, 20, seed=1)
+    decision = shield.step([28.0, 20.0, 10.0], 1.9)
+    assert decision.revised and decision.action is not None and decision.action <= 1.0
+    assert Shield.from_snapshot(shield.snapshot()).config == config
+
+
+def test_the_papers_reviser_refuses_a_criterion_without_a_direction() -> None:
+    with pytest.raises(InvalidConfig) as error:
+        ShieldConfig.from_dict({"criteria": [{"name": "fall", "direction": None}],
+                                "reviser": {"method": "paper"}})
+    assert error.value.field == "criteria.0.direction"
