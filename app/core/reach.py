@@ -28,9 +28,13 @@ observation was seen (the *extent*). So the worst case is what the world was see
 as a lead braking at its hardest, and no more: a speed never seen below zero does not go below
 it, and the box stops growing where the world stops. The bound's own dimension (a distance, a
 rate) is carried by the others, not disturbed: its one-step errors are the model's misfit, not
-the world's doing. An action fails the bound when the box reaches it, and its risk is the
-earlier the higher, ``1 - tau / (horizon + 1)`` with ``tau`` the crossing's time in steps,
-interpolated within its step, so that actions stay apart where no action avoids the bound.
+the world's doing. An action's box reaches the bound at ``tau`` steps (interpolated within
+its step; ``horizon + 1`` when it does not), and its risk is how much sooner that comes than
+the latest crossing of any action, ``(max tau - tau) / (horizon + 1)``: a bound tells the
+actions apart, sooner against later, and adds no risk that every action shares. A worst case
+is not a probability, and the risk it shares across all actions would otherwise outweigh
+what the outcomes learned (declaring a bound must never make the shield prefer an action
+whose learned outcomes fail).
 
 **Reach.** For an action bin a and criterion c the belief's models are blended into one at the
 current observation and rolled out for ``horizon`` steps: the first step under a, every later
@@ -167,8 +171,11 @@ def risk(dynamics: FloatArray, peak: FloatArray, extent: FloatArray, index: IntA
         if b >= 0:
             crossings(model, peak, extent, z, midpoints, u_safe, b, bounds[c, 1], bounds[c, 2],
                       horizon, when)
+            # a bound tells the actions apart and adds no risk that every action shares: the
+            # latest crossing counts as none
+            latest = when.max()
             for a in range(q):
-                out[a, c] = 1.0 - when[a] / (horizon + 1)
+                out[a, c] = (latest - when[a]) / (horizon + 1)
         if kept == 0:
             continue
         low[:] = math.inf

@@ -139,12 +139,13 @@ def reach(dynamics: FloatArray, prob: FloatArray, z: FloatArray, midpoints: Floa
     """Each bin's reach risk for one criterion (app.core.reach): the belief's blend of the
     states' dynamics, one step under the bin, then ``horizon - 1`` under ``safe_bin``, each
     point's closeness ``max(0, 1 - distance / radius)`` to the nearest failure point; with a
-    ``bound`` (dimension, below, above), ``1 - tau / (horizon + 1)`` where the box of worst
+    ``bound`` (dimension, below, above), ``(max tau - tau) / (horizon + 1)``, ``tau`` when the box of worst
     cases (intervals through ``A = I + W_z``, every dimension but the bound's widened by
     ``peak`` and kept within ``extent`` stretched to hold z) first reaches it, ``tau``
     interpolated within the step."""
     model = np.einsum("i,ikr->kr", prob, dynamics)
     out = np.zeros(midpoints.shape[0])
+    taus = np.zeros(midpoints.shape[0])
     for a, u in enumerate(midpoints):
         x = z.copy()
         for t in range(horizon):
@@ -154,8 +155,9 @@ def reach(dynamics: FloatArray, prob: FloatArray, z: FloatArray, midpoints: Floa
                 out[a] = max(out[a], 1.0 - distance / radius)
         if bound is not None:
             assert peak is not None and extent is not None
-            tau = _crossing(model, peak, extent, z, u, midpoints[safe_bin], bound, horizon)
-            out[a] = max(out[a], 1.0 - tau / (horizon + 1))
+            taus[a] = _crossing(model, peak, extent, z, u, midpoints[safe_bin], bound, horizon)
+    if bound is not None:  # what the latest crossing shares with the others counts as none
+        out = np.maximum(out, (taus.max() - taus) / (horizon + 1))
     return out
 
 

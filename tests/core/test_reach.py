@@ -91,12 +91,13 @@ CLOSING = np.array([[[0.0, 0.0, -1.0, 0.0], [-0.1, 0.0, 0.0, 0.2]]])
 
 
 @pytest.mark.parametrize(("peak", "expected"), [
-    # no disturbance: slow, h 0.2, 0.15, 0.15 (v stays at the 0 seen, not below): never, 0;
-    # fast: h 0.2, 0.05, then -0.05 halfway through the third step, tau 2.5
-    (0.0, [0.0, 1 - 2.5 / 6]),
+    # no disturbance: slow, h 0.2, 0.15, 0.15 (v stays at the 0 seen, not below): never
+    # (tau 6); fast: h 0.2, 0.05, then -0.05 halfway through the third step, tau 2.5
+    (0.0, [0.0, (6 - 2.5) / 6]),
     # the speed may rise by 0.05 more a step: slow, v within [0, 0.1], so the gap's low end
-    # goes 0.2, 0.1, 0.0: tau 3; fast, v within [0.1, 0.2]: 0.2, then 0.0, tau 2
-    (0.05, [0.5, 1 - 2 / 6]),
+    # goes 0.2, 0.1, 0.0: tau 3; fast, v within [0.1, 0.2]: 0.2, then 0.0, tau 2. Both
+    # cross: only the fast bin's earlier crossing counts, by the step it comes sooner
+    (0.05, [0.0, (3 - 2) / 6]),
 ])
 def test_a_bound_fails_an_action_when_the_box_of_its_worst_cases_reaches_it(
         peak: float, expected: list[float]) -> None:
