@@ -48,7 +48,7 @@ def _type_name(hint: Any) -> str:
     origin = typing.get_origin(hint)
     args = typing.get_args(hint)
     if origin is typing.Literal:
-        return " \\| ".join(f'`"{a}"`' for a in args)
+        return " \\| ".join("`null`" if a is None else f'`"{a}"`' for a in args)
     if origin is tuple:
         inner = ", ".join("..." if a is Ellipsis else _type_name(a).strip("`") for a in args)
         return f"`tuple[{inner}]`"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -125,3 +126,20 @@ def test_a_world_that_reports_a_task_figure_has_it_averaged_per_step() -> None:
 
     result = run(heldout("pile"), seed=2000, episodes=2, warmup=0, config=None)
     assert result["task"] is not None and result["task"] >= 0.0
+
+
+def test_the_table_gives_each_worlds_figures_in_a_row(tmp_path: Path) -> None:
+    import json
+
+    from bench.worlds.table import table
+
+    world = importlib.import_module("bench.worlds.braking_lead").WORLD
+    result = compare(world, [7], episodes=6, warmup=2)
+    path = tmp_path / "one.json"
+    path.write_text(json.dumps({"results": [result]}))
+    header, rule, line = table([path]).splitlines()
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert len(cells) == header.count("|") - 1 == rule.count("|") - 1
+    assert cells[:3] == [world.name, str(result["alone"]), str(result["shielded"])]
+    revised = result["runs"][0]["shielded"]["revised_share"]
+    assert cells[8] == f"{revised:.1%}" and cells[10] == "-"  # this world reports no task

@@ -112,6 +112,12 @@ def test_config_for_reads_the_spaces_and_asks_for_what_they_cannot_say() -> None
     bounded = config_for(pendulum, {"overspeed_cw": ("increase", Bound("x2", below=-6.0)),
                                     "overspeed_ccw": "decrease"})
     assert [c.bound for c in bounded.criteria] == [Bound("x2", below=-6.0), None]
+    # a failure whose saving direction depends on the state: none declared, with or without
+    # a bound
+    either = config_for(pendulum, {"overspeed": None,
+                                   "still": (None, Bound("x2", below=-7.0))})
+    assert [c.direction for c in either.criteria] == [None, None]
+    assert either.criteria[1].bound == Bound("x2", below=-7.0)
     with pytest.raises(InvalidConfig) as refused:
         config_for(pendulum, {"overspeed_cw": ("increase", Bound("theta_dot", below=-6.0))})
     assert refused.value.field == "criteria.0.bound.observation"
