@@ -98,7 +98,7 @@ def predict_ahead(
 def search(
     start_bin: int,
     verdict: int,
-    directions: Sequence[str],
+    directions: Sequence[str | None],
     n_bins: int,
     literal: bool,
     assess: Callable[[int], int],

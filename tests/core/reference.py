@@ -139,10 +139,10 @@ def reach(dynamics: FloatArray, prob: FloatArray, z: FloatArray, midpoints: Floa
     """Each bin's reach risk for one criterion (app.core.reach): the belief's blend of the
     states' dynamics, one step under the bin, then ``horizon - 1`` under ``safe_bin``, each
     point's closeness ``max(0, 1 - distance / radius)`` to the nearest failure point; with a
-    ``bound`` (dimension, below, above), ``(max tau - tau) / (horizon + 1)``, ``tau`` when the box of worst
-    cases (intervals through ``A = I + W_z``, every dimension but the bound's widened by
-    ``peak`` and kept within ``extent`` stretched to hold z) first reaches it, ``tau``
-    interpolated within the step."""
+    ``bound`` (dimension, below, above), ``(max tau - tau) / (horizon + 1)``, ``tau`` when
+    the box of worst cases (intervals through ``A = I + W_z``, every dimension but the
+    bound's widened by ``peak`` and kept within ``extent`` stretched to hold z) first
+    reaches it, interpolated within the step."""
     model = np.einsum("i,ikr->kr", prob, dynamics)
     out = np.zeros(midpoints.shape[0])
     taus = np.zeros(midpoints.shape[0])
