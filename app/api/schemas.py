@@ -88,8 +88,9 @@ class Candidate(BaseModel):
     verdict: str = Field(description="'ok' or the criterion predicted for it.")
     risk: dict[str, float] | None = Field(
         default=None, description="The risk reviser's risk of each failure for this action: "
-        "the larger of the local model's probability within its horizon and the reach's "
-        "closeness to a failure under the safest continuation; null for the paper's reviser.")
+        "the mean of the local model's probability within its horizon and the reach's "
+        "(the closeness to a failure under the safest continuation); null for the paper's "
+        "reviser.")
 
 
 class Decision(BaseModel):
@@ -99,17 +100,19 @@ class Decision(BaseModel):
     proposed: float | None = Field(description="The proposed action, echoed.")
     revised: bool = Field(description="Whether the reviser changed (or, in shadow mode, "
                           "would have changed) the action.")
-    reason: str = Field(description="pass, revised_safety, revised_speed, inactive, "
+    reason: str = Field(description="pass, revised_safety, revised_speed, backed_off (the "
+                        "risk reviser passed the proposal where its revisions were followed "
+                        "by more failures; suggested holds the revision), inactive, "
                         "cold_start or done.")
     verdict: str = Field(description="What inspecting the proposed action found.")
     risk: dict[str, float] = Field(description="The proposed action's risk per criterion: the "
-                                   "larger of the probability of that failure within the "
-                                   "horizon and the reach's closeness to one (risk reviser), "
-                                   "or the predicted mass on flagged states (paper).")
+                                   "mean of the probability of that failure within the "
+                                   "horizon and the reach's (risk reviser), or the predicted "
+                                   "mass on flagged states (paper).")
     threshold: float | None = Field(description="Alg. 1's adaptive threshold for the "
                                     "proposed action (paper reviser) or the largest total "
-                                    "risk kept by the table that refused the proposal, the "
-                                    "reach's or the local model's (risk reviser); null when "
+                                    "risk an action may carry and be applied, the least "
+                                    "total risk plus the margin (risk reviser); null when "
                                     "nothing was inspected.")
     candidates: list[Candidate] = Field(description="Actions inspected while revising.")
     state: int | None = Field(description="The recognised state (argmax belief).")

@@ -318,16 +318,17 @@ class ReviserConfig:
 class RiskConfig:
     """The failure-aware reviser (:mod:`app.core.local_risk`, :mod:`app.core.risk`).
 
-    An action is kept when its risk (the probability, summed over criteria, of a failure
-    within ``horizon`` steps, from a linear model per state in the observation and the action)
-    is at most ``threshold`` or within ``margin`` of the safest action's; otherwise the nearest
-    allowed action replaces it. The defaults act on any measurable difference
-    (docs/lab/risk-reviser.md).
+    Each action's total risk is the probability that any failure follows within ``horizon``
+    steps: per criterion the mean of a linear model per state in the observation and the
+    action, and of the reach. The proposal is kept when its total risk is at most ``threshold``
+    or within ``margin`` of the least; otherwise the nearest action within that limit replaces
+    it. The defaults act on any measurable difference (docs/lab/risk-reviser.md).
 
-    The reach (:mod:`app.core.reach`) asks first whether a failure can still be avoided:
+    The reach (:mod:`app.core.reach`) asks whether a failure can still be avoided:
     ``reach_horizon`` steps of the learned dynamics under the safest action after the one
     judged, a path counting as failing by its closeness to a failure seen, within
-    ``reach_radius`` in the clustering space.
+    ``reach_radius`` in the clustering space. The shield's own record (:mod:`app.core.record`)
+    counts failures within the farther of the two horizons.
     """
 
     horizon: int = 24
