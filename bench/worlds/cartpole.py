@@ -53,7 +53,7 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import World
+from bench.worlds.harness import plain_world
 from client.shield.spaces import config_for
 
 DT = 0.02  # [s]
@@ -179,11 +179,5 @@ BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
 })
 
 
-def _world(name: str, config: ShieldConfig) -> World:
-    return World(name=name, make=lambda seed: CartPole(), controller=Balancer, config=config,
-                 event=lambda obs, info: info["event"],
-                 shield_observation=lambda obs: [float(v) for v in obs], max_steps=MAX_STEPS)
-
-
-WORLD = _world("tuning-cartpole", CONFIG)
-WORLD_BOUNDED = _world("tuning-cartpole-bounded", BOUNDED)
+WORLD = plain_world("tuning-cartpole", CartPole, Balancer, CONFIG, MAX_STEPS)
+WORLD_BOUNDED = plain_world("tuning-cartpole-bounded", CartPole, Balancer, BOUNDED, MAX_STEPS)

@@ -48,7 +48,7 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import World
+from bench.worlds.harness import plain_world
 from client.shield.spaces import config_for
 
 DT = 0.05  # [h] a step of 3 min
@@ -165,11 +165,5 @@ BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
 })
 
 
-def _world(name: str, config: ShieldConfig) -> World:
-    return World(name=name, make=lambda seed: Chemostat(), controller=Regulator, config=config,
-                 event=lambda obs, info: info["event"],
-                 shield_observation=lambda obs: [float(v) for v in obs], max_steps=MAX_STEPS)
-
-
-WORLD = _world("tuning-chemostat", CONFIG)
-WORLD_BOUNDED = _world("tuning-chemostat-bounded", BOUNDED)
+WORLD = plain_world("tuning-chemostat", Chemostat, Regulator, CONFIG, MAX_STEPS)
+WORLD_BOUNDED = plain_world("tuning-chemostat-bounded", Chemostat, Regulator, BOUNDED, MAX_STEPS)

@@ -50,7 +50,7 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import World
+from bench.worlds.harness import plain_world
 from client.shield.spaces import config_for
 
 DT = 5.0  # [min]
@@ -174,11 +174,5 @@ BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
 })
 
 
-def _world(name: str, config: ShieldConfig) -> World:
-    return World(name=name, make=lambda seed: Dose(), controller=Pump, config=config,
-                 event=lambda obs, info: info["event"],
-                 shield_observation=lambda obs: [float(v) for v in obs], max_steps=MAX_STEPS)
-
-
-WORLD = _world("tuning-dose", CONFIG)
-WORLD_BOUNDED = _world("tuning-dose-bounded", BOUNDED)
+WORLD = plain_world("tuning-dose", Dose, Pump, CONFIG, MAX_STEPS)
+WORLD_BOUNDED = plain_world("tuning-dose-bounded", Dose, Pump, BOUNDED, MAX_STEPS)

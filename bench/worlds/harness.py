@@ -37,6 +37,17 @@ class World:
     max_steps: int
 
 
+def plain_world(name: str, make: Callable[[], Any],
+                controller: Callable[[int], Callable[[Any], float]], config: ShieldConfig,
+                max_steps: int) -> World:
+    """A world whose environment (``make()``, the same for every seed: ``reset(seed)`` draws)
+    names a step's failure in ``info["event"]`` and whose whole observation the shield sees."""
+    return World(name=name, make=lambda seed: make(), controller=controller, config=config,
+                 event=lambda observation, info: info["event"],
+                 shield_observation=lambda observation: [float(v) for v in observation],
+                 max_steps=max_steps)
+
+
 def run(world: World, seed: int, episodes: int, warmup: int,
         config: ShieldConfig | None) -> dict[str, Any]:
     """One run: ``episodes`` episodes of ``world`` from ``seed``; ``config`` None runs the
