@@ -801,7 +801,7 @@ class Shield:
                                                          strict=True)},
             "record": dict(zip(RECORD_COLUMNS, self._record_counts()[index].tolist(),
                                strict=True)),
-            "backed_off": bool(self._backed_off()[index]),
+            "backed_off": self.local_risk is not None and self.record.backs_off(index),
         }
 
     def _totals(self) -> list[int]:
