@@ -143,3 +143,10 @@ def test_the_table_gives_each_worlds_figures_in_a_row(tmp_path: Path) -> None:
     assert cells[:3] == [world.name, str(result["alone"]), str(result["shielded"])]
     revised = result["runs"][0]["shielded"]["revised_share"]
     assert cells[8] == f"{revised:.1%}" and cells[10] == "-"  # this world reports no task
+
+
+def test_the_held_out_worlds_of_68_are_found_by_name_with_or_without_bounds() -> None:
+    assert world_named("heldout_pile").name == "pile"
+    assert world_named("heldout_pile_bounded").name == "pile-bounded"
+    with pytest.raises(SystemExit, match="no held-out world 'nowhere'"):
+        world_named("heldout_nowhere")
