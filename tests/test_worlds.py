@@ -148,5 +148,7 @@ def test_the_table_gives_each_worlds_figures_in_a_row(tmp_path: Path) -> None:
 def test_the_held_out_worlds_of_68_are_found_by_name_with_or_without_bounds() -> None:
     assert world_named("heldout_pile").name == "pile"
     assert world_named("heldout_pile_bounded").name == "pile-bounded"
+    assert world_named("heldout2_reactor").name == "reactor"  # the second set
+    assert world_named("heldout2_aircraft_bounded").name == "aircraft-bounded"
     with pytest.raises(SystemExit, match="no held-out world 'nowhere'"):
         world_named("heldout_nowhere")

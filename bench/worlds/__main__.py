@@ -27,17 +27,19 @@ WORLDS = ("braking_lead", "pendulum", "wall", "lane")
 
 
 def world_named(name: str) -> World:
-    """A world of #44 by module name, one of #68's held-out worlds as ``heldout_NAME`` (with
-    its bounds: ``heldout_NAME_bounded``), or a tuning world by its name in
-    :data:`bench.worlds.tuning.WORLDS` (``tuning_*``, and highway-env's ``highway*``)."""
-    if name.startswith("heldout_"):  # bench/heldout: heldout_pile, heldout_pile_bounded, ...
-        from bench.heldout import world
-
-        base = name.removeprefix("heldout_")
-        try:
-            return world(base.removesuffix("_bounded"), base.endswith("_bounded"))
-        except ValueError as error:
-            raise SystemExit(str(error)) from None
+    """A world of #44 by module name, one of #68's held-out worlds as ``heldout_NAME`` or
+    ``heldout2_NAME`` (the second set; with its bounds: ``heldout_NAME_bounded``), or a
+    tuning world by its name in :data:`bench.worlds.tuning.WORLDS` (``tuning_*``, and
+    highway-env's ``highway*``)."""
+    for prefix, package in (("heldout_", "bench.heldout"), ("heldout2_", "bench.heldout2")):
+        if name.startswith(prefix):  # heldout_pile, heldout2_reactor_bounded, ...
+            base = name.removeprefix(prefix)
+            try:
+                found: World = importlib.import_module(package).world(
+                    base.removesuffix("_bounded"), base.endswith("_bounded"))
+            except ValueError as error:
+                raise SystemExit(str(error)) from None
+            return found
     if name.startswith(("tuning_", "highway")):
         from bench.worlds.tuning import WORLDS as TUNING  # the simulator's lead data, on demand
 
