@@ -67,17 +67,25 @@ def main(argv: list[str] | None = None) -> None:
 def serve(options: list[str]) -> None:
     """The service in this process, until stopped."""
     settings = parse(Settings, options)
-    logging.basicConfig(level=settings.log_level.upper(),
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
     warm_core()
-    http, ws = protocols(ConnectionLimits(settings.header_timeout, settings.body_timeout,
-                                          settings.max_connections))
+    http, ws = protocols(
+        ConnectionLimits(settings.header_timeout, settings.body_timeout, settings.max_connections)
+    )
     # a WebSocket frame over the body limit gets an error frame (app/api/routes/stream.py);
     # one over twice the limit is not kept: the stream closes with 1009
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
-                log_level=settings.log_level, http=http, ws=ws,
-                ws_max_size=2 * settings.max_body_bytes,
-                timeout_keep_alive=settings.keep_alive_timeout)
+    uvicorn.run(
+        create_app(settings),
+        host=settings.host,
+        port=settings.port,
+        log_level=settings.log_level,
+        http=http,
+        ws=ws,
+        ws_max_size=2 * settings.max_body_bytes,
+        timeout_keep_alive=settings.keep_alive_timeout,
+    )
 
 
 def parse(kind: type[S], options: list[str]) -> S:
@@ -95,8 +103,9 @@ def parse(kind: type[S], options: list[str]) -> S:
             with tempfile.TemporaryFile(dir=settings.data_dir):
                 pass
         except OSError as error:
-            usage_error(f"--data-dir (EFSM_DATA_DIR): cannot write to {settings.data_dir}: "
-                        f"{error.strerror}")
+            usage_error(
+                f"--data-dir (EFSM_DATA_DIR): cannot write to {settings.data_dir}: {error.strerror}"
+            )
     return settings
 
 
@@ -118,8 +127,9 @@ def usage_error(message: str) -> NoReturn:
 def serve_ray(argv: list[str]) -> None:
     """The service sharded on Ray Serve (imported here: Ray is an optional extra)."""
     settings = parse(ClusterSettings, argv)
-    logging.basicConfig(level=settings.log_level.upper(),
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
     try:
         from app.cluster import ray_serve
     except ImportError as error:
@@ -136,8 +146,9 @@ def warm_core() -> None:
     log.info("loading the compiled core (on a first start it compiles: about a minute)")
     done = compiled.warm()
     if done.compiled:
-        log.info("compiled %d kernels in %.1f s; cached for the next start", done.compiled,
-                 done.seconds)
+        log.info(
+            "compiled %d kernels in %.1f s; cached for the next start", done.compiled, done.seconds
+        )
     else:
         log.info("compiled core loaded from its cache in %.2f s", done.seconds)
 

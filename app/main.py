@@ -32,8 +32,12 @@ def default_config(settings: Settings) -> ShieldConfig:
 
 def model_limits(settings: Settings) -> ModelLimits:
     """What a model of this server may be (:mod:`app.service.limits`)."""
-    return ModelLimits(settings.max_states, settings.max_action_bins, settings.max_dimensions,
-                       settings.max_model_bytes)
+    return ModelLimits(
+        settings.max_states,
+        settings.max_action_bins,
+        settings.max_dimensions,
+        settings.max_model_bytes,
+    )
 
 
 def create_app(settings: Settings | None = None, *, create_default: bool = True) -> FastAPI:
@@ -41,10 +45,16 @@ def create_app(settings: Settings | None = None, *, create_default: bool = True)
     cluster (:mod:`app.cluster`) passes ``create_default=False``: the 'default' model lives on
     the one shard that owns its name."""
     settings = settings or get_settings()
-    registry = ModelRegistry(settings.data_dir, settings.fsync, settings.snapshot_every,
-                             default_config(settings), max_models=settings.max_models,
-                             limits=model_limits(settings), create_default=create_default,
-                             idempotency_window=settings.idempotency_window)
+    registry = ModelRegistry(
+        settings.data_dir,
+        settings.fsync,
+        settings.snapshot_every,
+        default_config(settings),
+        max_models=settings.max_models,
+        limits=model_limits(settings),
+        create_default=create_default,
+        idempotency_window=settings.idempotency_window,
+    )
 
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
@@ -69,8 +79,10 @@ def create_app(settings: Settings | None = None, *, create_default: bool = True)
     errors.install(api)
     for router in (revise.router, models.router, stream.router, ops.router, watch.router):
         api.include_router(router)
-    api.add_middleware(BodyLimit, limit=settings.max_body_bytes,
-                       snapshot_limit=settings.max_snapshot_bytes)
-    api.add_middleware(Metrics, requests=api.state.metrics.requests,
-                       latency=api.state.metrics.latency)
+    api.add_middleware(
+        BodyLimit, limit=settings.max_body_bytes, snapshot_limit=settings.max_snapshot_bytes
+    )
+    api.add_middleware(
+        Metrics, requests=api.state.metrics.requests, latency=api.state.metrics.latency
+    )
     return api

@@ -41,33 +41,43 @@ class Settings(BaseSettings):
     )
     max_body_bytes: int = Field(8 * 2**20, ge=1024, description="Largest request body (413).")
     max_snapshot_bytes: int = Field(
-        256 * 2**20, ge=1024,
+        256 * 2**20,
+        ge=1024,
         description="Largest snapshot uploaded with PUT /models/{name} (413), and the most its "
         "arrays may take once read (422 invalid_snapshot).",
     )
     max_batch: int = Field(4096, ge=1, description="Most steps in one batch request.")
     max_models: int = Field(1000, ge=1, description="Most models this server holds (409).")
     max_states: int = Field(
-        100_000, ge=1, le=1_000_000,
+        100_000,
+        ge=1,
+        le=1_000_000,
         description="The largest limits.max_states a model of this server may have (422).",
     )
     max_action_bins: int = Field(
-        256, ge=2, le=4096,
+        256,
+        ge=2,
+        le=4096,
         description="The most action bins (the range over the step) a model may have (422).",
     )
     max_dimensions: int = Field(
-        64, ge=1, le=1024,
+        64,
+        ge=1,
+        le=1024,
         description="The most observation names and features together a model may have (422).",
     )
     max_model_bytes: int = Field(
-        256 * 2**20, ge=2**20,
+        256 * 2**20,
+        ge=2**20,
         description="The most memory a model's tables may take once it holds its "
         "limits.max_states states and limits.max_streams streams, by the server's estimate "
         "(422, naming limits.max_states; the default configuration takes about 120 MiB). "
         "Keep it within max_snapshot_bytes, so that every model's snapshot restores.",
     )
     max_concurrent_restores: int = Field(
-        2, ge=1, le=64,
+        2,
+        ge=1,
+        le=64,
         description="Snapshots read at once by PUT /models/{name}; more wait their turn. "
         "Each takes up to about twice max_snapshot_bytes while it is read.",
     )
@@ -75,26 +85,33 @@ class Settings(BaseSettings):
         50_000, ge=1, description="Steps of a model between two snapshots of it."
     )
     idempotency_window: int = Field(
-        1024, ge=1, le=65_536,
+        1024,
+        ge=1,
+        le=65_536,
         description="Steps sent with an idempotency key that each model remembers (the last "
         "ones, about 0.5 KB each): a step sent again within them is answered with its first "
         "decision, not applied again; one request carries at most this many keyed steps of a "
         "model (413).",
     )
     header_timeout: float = Field(
-        10.0, gt=0, le=3600,
+        10.0,
+        gt=0,
+        le=3600,
         description="Seconds a request's line and headers may take to arrive, from the "
         "connection's opening or the request's first byte (then 408 and the connection closes).",
     )
     body_timeout: float = Field(
-        20.0, gt=0, le=3600,
+        20.0,
+        gt=0,
+        le=3600,
         description="Longest pause, in seconds, between two reads of a request's body (408).",
     )
     keep_alive_timeout: int = Field(
         5, ge=1, le=3600, description="Seconds an idle kept-alive connection stays open."
     )
     max_connections: int = Field(
-        1000, ge=1,
+        1000,
+        ge=1,
         description="Most connections open at once, HTTP and WebSocket; one more is answered "
         "503 and closed. Keep it under the process's open-file limit (ulimit -n).",
     )
@@ -132,16 +149,28 @@ class ClusterSettings(Settings):
     # merged into the inherited configuration: only the program name differs
     model_config = SettingsConfigDict(cli_prog_name="python -m app serve-ray")
 
-    shards: int = Field(2, ge=1, le=1024, description="Shards; each owns the models whose "
-                        "names it wins, and keeps its files under <data-dir>/shards/<i>.")
-    ingresses: int = Field(1, ge=1, le=1024, description="Ingress replicas (each takes any "
-                           "request; Serve spreads requests over them).")
+    shards: int = Field(
+        2,
+        ge=1,
+        le=1024,
+        description="Shards; each owns the models whose "
+        "names it wins, and keeps its files under <data-dir>/shards/<i>.",
+    )
+    ingresses: int = Field(
+        1,
+        ge=1,
+        le=1024,
+        description="Ingress replicas (each takes any request; Serve spreads requests over them).",
+    )
     ray_address: str | None = Field(
-        None, description="An existing Ray cluster ('auto', or ray://host:port); without it a "
-        "local Ray instance starts and stops with the service.")
+        None,
+        description="An existing Ray cluster ('auto', or ray://host:port); without it a "
+        "local Ray instance starts and stops with the service.",
+    )
     ray_cpus: int | None = Field(None, ge=1, description="CPUs of the local Ray instance.")
-    ray_object_store_mb: int = Field(256, ge=64, description="Object store of the local Ray "
-                                     "instance (MiB).")
+    ray_object_store_mb: int = Field(
+        256, ge=64, description="Object store of the local Ray instance (MiB)."
+    )
 
 
 @lru_cache

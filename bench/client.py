@@ -109,8 +109,9 @@ def training(shield: StepShield, episodes: int, update_first: bool) -> tuple[flo
     return seconds, steps
 
 
-def lockstep_against_separate(runs: int, episodes: int, url: str = "local",
-                              update_first: bool = False) -> dict[str, float]:
+def lockstep_against_separate(
+    runs: int, episodes: int, url: str = "local", update_first: bool = False
+) -> dict[str, float]:
     """Seconds for ``runs`` x ``episodes`` of ddpg+shield, one run after another and in
     lockstep, with their steps (all runs' one after another; the longest run's in lockstep,
     one step of every run each); with a service ``url``, separate runs use WebSocket and
@@ -120,24 +121,34 @@ def lockstep_against_separate(runs: int, episodes: int, url: str = "local",
     from client.experiment.runner import ExperimentConfig, run_one
 
     def steps(out: str) -> list[int]:
-        return [sum(r.steps for r in records.read(records.path_for(Path(out), "ddpg+shield",
-                                                                    run))[1])
-                for run in range(runs)]
+        return [
+            sum(r.steps for r in records.read(records.path_for(Path(out), "ddpg+shield", run))[1])
+            for run in range(runs)
+        ]
 
-    config = ExperimentConfig(arms=("ddpg+shield",), runs=runs, episodes=episodes, seed=0,
-                              ddpg={"warmup": 256, "update_first": update_first}, shield=url,
-                              transport="ws",
-                              shield_config={"reviser": {"activate_after_episodes": 0}})
+    config = ExperimentConfig(
+        arms=("ddpg+shield",),
+        runs=runs,
+        episodes=episodes,
+        seed=0,
+        ddpg={"warmup": 256, "update_first": update_first},
+        shield=url,
+        transport="ws",
+        shield_config={"reviser": {"activate_after_episodes": 0}},
+    )
     with tempfile.TemporaryDirectory() as separate, tempfile.TemporaryDirectory() as together:
         start = time.perf_counter()
         for run in range(runs):
             run_one(config, "ddpg+shield", run, Path(separate))
         one_by_one = time.perf_counter() - start
         start = time.perf_counter()
-        run_lockstep(dataclasses.replace(config, transport="batch"), "ddpg+shield",
-                     Path(together))
-        return {"separate_s": one_by_one, "lockstep_s": time.perf_counter() - start,
-                "separate_steps": sum(steps(separate)), "lockstep_steps": max(steps(together))}
+        run_lockstep(dataclasses.replace(config, transport="batch"), "ddpg+shield", Path(together))
+        return {
+            "separate_s": one_by_one,
+            "lockstep_s": time.perf_counter() - start,
+            "separate_steps": sum(steps(separate)),
+            "lockstep_steps": max(steps(together)),
+        }
 
 
 def main() -> None:
@@ -172,31 +183,50 @@ def main() -> None:
                     shield.close()
                     times.setdefault((order, name), []).append(seconds)
                     steps[order, name] = n
-        remote = {order: [lockstep_against_separate(10, 3, url, first)
-                          for _ in range(args.rounds)] for order, first in orders.items()}
-    local = {order: [lockstep_against_separate(10, 3, "local", first)
-                     for _ in range(args.rounds)] for order, first in orders.items()}
-    results: dict[str, Any] = {"simulator_steps_per_s": sim, "ddpg_update_ms": update,
-                               "ensemble_update_ms_10": ensemble, "training": {}}
-    print(f"\nseed 0; {args.rounds} rounds; {args.episodes} training episodes each; "
-          f"{platform.machine()}, Python {platform.python_version()}, torch "
-          f"{torch.__version__} (1 thread)\n")
+        remote = {
+            order: [lockstep_against_separate(10, 3, url, first) for _ in range(args.rounds)]
+            for order, first in orders.items()
+        }
+    local = {
+        order: [lockstep_against_separate(10, 3, "local", first) for _ in range(args.rounds)]
+        for order, first in orders.items()
+    }
+    results: dict[str, Any] = {
+        "simulator_steps_per_s": sim,
+        "ddpg_update_ms": update,
+        "ensemble_update_ms_10": ensemble,
+        "training": {},
+    }
+    print(
+        f"\nseed 0; {args.rounds} rounds; {args.episodes} training episodes each; "
+        f"{platform.machine()}, Python {platform.python_version()}, torch "
+        f"{torch.__version__} (1 thread)\n"
+    )
     print(f"simulator alone: {sim:,.0f} steps per second")
     print(f"DDPG update (batch 64, 64x64 networks): {update:.2f} ms")
-    print(f"one vectorised update of 10 learners: {ensemble:.2f} ms "
-          f"({10 * update / ensemble:.1f}x faster than 10 updates)\n")
+    print(
+        f"one vectorised update of 10 learners: {ensemble:.2f} ms "
+        f"({10 * update / ensemble:.1f}x faster than 10 updates)\n"
+    )
     print("| order | shield reached | training wall time (s) | steps | vs in-process, same order |")
     print("|---|---|---:|---:|---:|")
     for (order, name), values in times.items():
         median = statistics.median(values)
         base = statistics.median(times[order, "in-process"])
-        results["training"][f"{order}: {name}"] = {"seconds": median, "steps": steps[order, name],
-                                                   "ratio": median / base}
+        results["training"][f"{order}: {name}"] = {
+            "seconds": median,
+            "steps": steps[order, name],
+            "ratio": median / base,
+        }
         print(f"| {order} | {name} | {median:.1f} | {steps[order, name]} | {median / base:.2f}x |")
-    print("\n10 runs x 3 episodes of ddpg+shield, one after another (WebSocket against the "
-          "service) and in lockstep (the batch route):\n")
-    print("| order | shield | one after another (s) | ms a step | lockstep (s) "
-          "| ms a lockstep step | lockstep vs in-process, same order |")
+    print(
+        "\n10 runs x 3 episodes of ddpg+shield, one after another (WebSocket against the "
+        "service) and in lockstep (the batch route):\n"
+    )
+    print(
+        "| order | shield | one after another (s) | ms a step | lockstep (s) "
+        "| ms a lockstep step | lockstep vs in-process, same order |"
+    )
     print("|---|---|---:|---:|---:|---:|---:|")
     results["lockstep"] = {}
     for order in orders:
@@ -204,10 +234,12 @@ def main() -> None:
         for where, rows in (("in-process", local[order]), ("service", remote[order])):
             m = {key: statistics.median(r[key] for r in rows) for key in rows[0]}
             results["lockstep"][f"{order}: {where}"] = m
-            print(f"| {order} | {where} | {m['separate_s']:.1f} "
-                  f"| {1e3 * m['separate_s'] / m['separate_steps']:.2f} | {m['lockstep_s']:.1f} "
-                  f"| {1e3 * m['lockstep_s'] / m['lockstep_steps']:.2f} "
-                  f"| {m['lockstep_s'] / base:.2f}x |")
+            print(
+                f"| {order} | {where} | {m['separate_s']:.1f} "
+                f"| {1e3 * m['separate_s'] / m['separate_steps']:.2f} | {m['lockstep_s']:.1f} "
+                f"| {1e3 * m['lockstep_s'] / m['lockstep_steps']:.2f} "
+                f"| {m['lockstep_s'] / base:.2f}x |"
+            )
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
 

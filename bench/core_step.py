@@ -43,13 +43,23 @@ def spread(config: ShieldConfig, n: int, rng: np.random.Generator) -> Shield:
     observation cube, every per-state table grown for them and nothing learned yet."""
     shield = Shield(config)
     centres = rng.uniform(0.0, 1.0, (n, 3))
-    shield.clusterer = EvolvingClusterer.restore(config.clustering, 3, n, {
-        "k": 10 * n, "beta": centres.sum(axis=0) * 10, "sigma": float((centres**2).sum()) * 10,
-        "capacity_hits": 0, "centres": centres,
-        "sq_norms": np.array([float(c @ c) for c in centres]),
-        "potentials": np.full(n, 0.5), "radii": np.full(n, 0.6 / n ** (1 / 3)),
-        "support": np.full(n, 10), "scatter": np.full(n, 0.01),
-    })
+    shield.clusterer = EvolvingClusterer.restore(
+        config.clustering,
+        3,
+        n,
+        {
+            "k": 10 * n,
+            "beta": centres.sum(axis=0) * 10,
+            "sigma": float((centres**2).sum()) * 10,
+            "capacity_hits": 0,
+            "centres": centres,
+            "sq_norms": np.array([float(c @ c) for c in centres]),
+            "potentials": np.full(n, 0.5),
+            "radii": np.full(n, 0.6 / n ** (1 / 3)),
+            "support": np.full(n, 10),
+            "scatter": np.full(n, 0.01),
+        },
+    )
     for _ in range(n):
         shield._add_state()
     return shield
@@ -68,8 +78,7 @@ def build(n: int, seed: int = SEED) -> dict[str, Any]:
     prev = recognise(shield.clusterer.sq_distances(z), variances, config.limits.belief_top_k)
     for _ in range(20 * n):
         z = np.clip(z + rng.normal(0, 0.05, 3), 0, 1)
-        belief = recognise(shield.clusterer.sq_distances(z), variances,
-                           config.limits.belief_top_k)
+        belief = recognise(shield.clusterer.sq_distances(z), variances, config.limits.belief_top_k)
         shield.transitions.learn_one(prev, int(rng.integers(20)), belief)
         prev = belief
     return shield.snapshot()
@@ -94,10 +103,14 @@ def densify(data: dict[str, Any]) -> Shield:
     tpm = lazy.transitions
     assert isinstance(tpm, LazyTransitions)
     q = lazy.config.action.n_bins
-    dense = DenseTransitions.restore(q, lazy.config.transitions, {
-        "P": np.stack([tpm.matrix(a) for a in range(q)]),
-        "F_o": np.stack([tpm.row_mass(a) for a in range(q)]),
-    })
+    dense = DenseTransitions.restore(
+        q,
+        lazy.config.transitions,
+        {
+            "P": np.stack([tpm.matrix(a) for a in range(q)]),
+            "F_o": np.stack([tpm.row_mass(a) for a in range(q)]),
+        },
+    )
     data = {**data, "transitions": dense.snapshot()}
     data["config"] = copy.deepcopy(data["config"])
     data["config"]["limits"]["tpm_backend"] = "dense"
@@ -167,19 +180,25 @@ def main() -> None:
         rows.append(row)
         print(f"n={n}: done", flush=True)
 
-    print(f"\nseed {SEED}; {args.rounds} rounds of {args.steps} steps (dense: "
-          f"{args.dense_steps}); median of round means; {platform.machine()}, "
-          f"numpy {np.__version__}, Python {platform.python_version()}\n")
+    print(
+        f"\nseed {SEED}; {args.rounds} rounds of {args.steps} steps (dense: "
+        f"{args.dense_steps}); median of round means; {platform.machine()}, "
+        f"numpy {np.__version__}, Python {platform.python_version()}\n"
+    )
     for workload in ("inspect", "search"):
         base = rows[0][workload]["lazy_us"]
-        print(f"workload {workload!r} "
-              f"({rows[0][workload]['inspected_per_step']:.0f} actions inspected per step)\n")
+        print(
+            f"workload {workload!r} "
+            f"({rows[0][workload]['inspected_per_step']:.0f} actions inspected per step)\n"
+        )
         print("| states | lazy step (us) | vs smallest | dense step (us) | dense / lazy |")
         print("|---:|---:|---:|---:|---:|")
         for row in rows:
             w = row[workload]
-            print(f"| {row['states']} | {w['lazy_us']:.0f} | {w['lazy_us'] / base:.2f}x "
-                  f"| {w['dense_us']:.0f} | {w['dense_us'] / w['lazy_us']:.1f}x |")
+            print(
+                f"| {row['states']} | {w['lazy_us']:.0f} | {w['lazy_us'] / base:.2f}x "
+                f"| {w['dense_us']:.0f} | {w['dense_us'] / w['lazy_us']:.1f}x |"
+            )
         print()
     print("| states | lazy matrices (MB) | dense matrices (MB) |")
     print("|---:|---:|---:|")

@@ -50,8 +50,10 @@ TRAINING_SHIELD = {"reviser": {"activate_after_episodes": 0}}
 
 def with_overrides(config: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     """``config`` with the sections of ``overrides`` laid over its own."""
-    return {**config, **{section: {**config.get(section, {}), **fields}
-                         for section, fields in overrides.items()}}
+    return {
+        **config,
+        **{section: {**config.get(section, {}), **fields} for section, fields in overrides.items()},
+    }
 
 
 def record_training(episodes: int, path: Path, overrides: dict[str, Any]) -> int:
@@ -144,18 +146,27 @@ def child(training: str, shield_json: str) -> None:
             start = time.perf_counter()
             decisions = [shield.step(z, a) for z, a in block]
             us = (time.perf_counter() - start) / len(block) * 1e6
-        print(json.dumps({"us": us, "digest": digest(shield, decisions),
-                          "states": shield.n_states}), flush=True)
+        print(
+            json.dumps({"us": us, "digest": digest(shield, decisions), "states": shield.n_states}),
+            flush=True,
+        )
 
 
 class Worker:
     """One commit's child process, kept alive between requests."""
 
     def __init__(self, tree: Path, training: Path, shield: str) -> None:
-        code = (f"import runpy, sys; sys.path.insert(0, {str(tree)!r}); "
-                f"runpy.run_path({__file__!r})['child']({str(training)!r}, {shield!r})")
-        self.process = subprocess.Popen([sys.executable, "-c", code], cwd=tree, text=True,
-                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        code = (
+            f"import runpy, sys; sys.path.insert(0, {str(tree)!r}); "
+            f"runpy.run_path({__file__!r})['child']({str(training)!r}, {shield!r})"
+        )
+        self.process = subprocess.Popen(
+            [sys.executable, "-c", code],
+            cwd=tree,
+            text=True,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+        )
 
     def time(self, round_index: int, key: str) -> dict[str, Any]:
         assert self.process.stdin is not None and self.process.stdout is not None
@@ -178,31 +189,46 @@ def main() -> None:
     parser.add_argument("base", help="the baseline commit")
     parser.add_argument("head", help="the commit measured against it")
     parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--episodes", type=int, default=40,
-                        help="episodes of the recorded training")
-    parser.add_argument("--shield", default="{}",
-                        help="shield overrides (JSON) laid over every workload's configuration")
+    parser.add_argument(
+        "--episodes", type=int, default=40, help="episodes of the recorded training"
+    )
+    parser.add_argument(
+        "--shield",
+        default="{}",
+        help="shield overrides (JSON) laid over every workload's configuration",
+    )
     parser.add_argument("--json", help="also write the results here")
     args = parser.parse_args()
     overrides = json.loads(args.shield)
 
-    revs = {name: subprocess.run(["git", "rev-parse", "--short", rev], cwd=ROOT, check=True,
-                                 capture_output=True, text=True).stdout.strip()
-            for name, rev in (("base", args.base), ("head", args.head))}
+    revs = {
+        name: subprocess.run(
+            ["git", "rev-parse", "--short", rev],
+            cwd=ROOT,
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
+        for name, rev in (("base", args.base), ("head", args.head))
+    }
     with tempfile.TemporaryDirectory() as tmp:
         trees = {name: Path(tmp) / name for name in revs}
         for name, rev in revs.items():
-            subprocess.run(["git", "worktree", "add", "--detach", str(trees[name]), rev],
-                           cwd=ROOT, check=True, capture_output=True)
+            subprocess.run(
+                ["git", "worktree", "add", "--detach", str(trees[name]), rev],
+                cwd=ROOT,
+                check=True,
+                capture_output=True,
+            )
         training = Path(tmp) / "training.json"
         recorded = record_training(args.episodes, training, overrides)
-        print(f"recorded {recorded} shield steps of {args.episodes} training episodes",
-              flush=True)
+        print(f"recorded {recorded} shield steps of {args.episodes} training episodes", flush=True)
         keys = [f"{n}/{w}" for n in SIZES for w in STEPS] + ["training"]
         workers = {name: Worker(trees[name], training, args.shield) for name in revs}
         try:
             rounds: dict[str, dict[str, list[dict[str, Any]]]] = {
-                name: {key: [] for key in keys} for name in revs}
+                name: {key: [] for key in keys} for name in revs
+            }
             for r in range(args.rounds):
                 for key in keys:  # the two take turns, first one then the other
                     for name in list(revs)[:: 1 if r % 2 == 0 else -1]:
@@ -212,33 +238,53 @@ def main() -> None:
             for worker in workers.values():
                 worker.close()
             for tree in trees.values():
-                subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT,
-                               check=False, capture_output=True)
+                subprocess.run(
+                    ["git", "worktree", "remove", "--force", str(tree)],
+                    cwd=ROOT,
+                    check=False,
+                    capture_output=True,
+                )
 
-    result: dict[str, Any] = {"base": revs["base"], "head": revs["head"], "rounds": args.rounds,
-                              "training_steps": recorded, "shield": overrides,
-                              "python": platform.python_version(),
-                              "rows": []}
-    print(f"\n{args.rounds} rounds, the two commits taking turns workload by workload; "
-          f"medians of the rounds (us per step) and of the paired ratios; {platform.machine()}, "
-          f"Python {platform.python_version()}; shield overrides {args.shield}\n")
-    print(f"| states | workload | {revs['base']} (us) | {revs['head']} (us) | speed-up "
-          "| identical decisions |")
+    result: dict[str, Any] = {
+        "base": revs["base"],
+        "head": revs["head"],
+        "rounds": args.rounds,
+        "training_steps": recorded,
+        "shield": overrides,
+        "python": platform.python_version(),
+        "rows": [],
+    }
+    print(
+        f"\n{args.rounds} rounds, the two commits taking turns workload by workload; "
+        f"medians of the rounds (us per step) and of the paired ratios; {platform.machine()}, "
+        f"Python {platform.python_version()}; shield overrides {args.shield}\n"
+    )
+    print(
+        f"| states | workload | {revs['base']} (us) | {revs['head']} (us) | speed-up "
+        "| identical decisions |"
+    )
     print("|---:|---|---:|---:|---:|---|")
     for key in keys:
         base, head = rounds["base"][key], rounds["head"][key]
         # rounds draw their own steps: compare the two commits round by round
         identical = all(b["digest"] == h["digest"] for b, h in zip(base, head, strict=True))
         speed_up = statistics.median(b["us"] / h["us"] for b, h in zip(base, head, strict=True))
-        n, workload = key.split("/") if "/" in key else (
-            str(base[0]["states"]), key)  # training: the states it ends with
-        row = {"states": int(n), "workload": workload,
-               "base_us": statistics.median(b["us"] for b in base),
-               "head_us": statistics.median(h["us"] for h in head),
-               "speed_up": speed_up, "identical": identical}
+        n, workload = (
+            key.split("/") if "/" in key else (str(base[0]["states"]), key)
+        )  # training: the states it ends with
+        row = {
+            "states": int(n),
+            "workload": workload,
+            "base_us": statistics.median(b["us"] for b in base),
+            "head_us": statistics.median(h["us"] for h in head),
+            "speed_up": speed_up,
+            "identical": identical,
+        }
         result["rows"].append(row)
-        print(f"| {n} | {workload} | {row['base_us']:.0f} | {row['head_us']:.0f} "
-              f"| {speed_up:.2f}x | {'yes' if identical else 'NO'} |")
+        print(
+            f"| {n} | {workload} | {row['base_us']:.0f} | {row['head_us']:.0f} "
+            f"| {speed_up:.2f}x | {'yes' if identical else 'NO'} |"
+        )
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=2))
 

@@ -32,8 +32,13 @@ def runs_of(archive: Path) -> dict[str, list[tuple[int, int, float]]]:
             stream = tar.extractfile(member)
             assert stream is not None
             episodes = [json.loads(line) for line in stream.read().splitlines()[1:]]
-            runs[arm].append((len(episodes), sum(e["steps"] for e in episodes),
-                              sum(e["wall_s"] for e in episodes)))
+            runs[arm].append(
+                (
+                    len(episodes),
+                    sum(e["steps"] for e in episodes),
+                    sum(e["wall_s"] for e in episodes),
+                )
+            )
     return runs
 
 
@@ -41,16 +46,20 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("archives", nargs="+", type=Path)
     args = parser.parse_args()
-    print("| layout | arm | episodes reached | ms per step of a run (median) "
-          "| steps per second, all runs |")
+    print(
+        "| layout | arm | episodes reached | ms per step of a run (median) "
+        "| steps per second, all runs |"
+    )
     print("|---|---|---:|---:|---:|")
     for archive in args.archives:
         for arm, runs in runs_of(archive).items():
             episodes = [e for e, _, _ in runs]
             per_step = statistics.median(wall / steps * 1e3 for _, steps, wall in runs)
             rate = sum(s for _, s, _ in runs) / max(w for _, _, w in runs)
-            print(f"| {archive.name.removesuffix('.tar.gz')} | {arm} | "
-                  f"{min(episodes)}-{max(episodes)} | {per_step:.2f} | {rate:,.0f} |")
+            print(
+                f"| {archive.name.removesuffix('.tar.gz')} | {arm} | "
+                f"{min(episodes)}-{max(episodes)} | {per_step:.2f} | {rate:,.0f} |"
+            )
 
 
 if __name__ == "__main__":

@@ -117,10 +117,25 @@ class Server:
         out = self.data.parent / f"server-{port}.log"
         self.log.append(out)
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "app", "serve", "--host", "127.0.0.1", "--port", str(port),
-             "--data-dir", str(self.data), "--fsync", "always",
-             "--snapshot-every", str(SNAPSHOT_EVERY)],
-            stdout=open(out, "wb"), stderr=subprocess.STDOUT)
+            [
+                sys.executable,
+                "-m",
+                "app",
+                "serve",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--data-dir",
+                str(self.data),
+                "--fsync",
+                "always",
+                "--snapshot-every",
+                str(SNAPSHOT_EVERY),
+            ],
+            stdout=open(out, "wb"),
+            stderr=subprocess.STDOUT,
+        )
         deadline = time.monotonic() + 120  # a cold kernel cache compiles first
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
@@ -157,9 +172,12 @@ class Server:
 
 def _body(rng: random.Random, t: int) -> dict[str, Any]:
     done = t % 25 == 24
-    return {"observation": [rng.uniform(0, 30), rng.uniform(0, 120), rng.uniform(0, 30)],
-            "action": None if done else rng.uniform(-3, 2), "done": done,
-            "idempotency_key": new_key()}
+    return {
+        "observation": [rng.uniform(0, 30), rng.uniform(0, 120), rng.uniform(0, 30)],
+        "action": None if done else rng.uniform(-3, 2),
+        "done": done,
+        "idempotency_key": new_key(),
+    }
 
 
 @dataclass
@@ -202,8 +220,9 @@ def _drive(server: Server, models: list[str], seed: int, seconds: float) -> dict
     return drives
 
 
-def _send_again(server: Server, model: str, body: dict[str, Any] | None, applied: bool,
-                outcome: Outcome) -> None:
+def _send_again(
+    server: Server, model: str, body: dict[str, Any] | None, applied: bool, outcome: Outcome
+) -> None:
     """Send the unanswered step again, as a client with ``retry`` does; count a second apply."""
     if body is None:
         return
@@ -262,15 +281,15 @@ def trial(seed: int, seconds: tuple[float, float] = (1.0, 3.0)) -> dict[str, Out
                 outcome.lost = max(0, start[kind] + n - final)
                 if sorted(drive.versions) != list(range(start[kind] + 1, start[kind] + n + 1)):
                     raise AssertionError(f"{kind}: answered versions are not consecutive")
-                _send_again(server, names[kind], drive.unanswered, final > start[kind] + n,
-                            outcome)
+                _send_again(server, names[kind], drive.unanswered, final > start[kind] + n, outcome)
         finally:
             server.stop()
     return outcomes
 
 
-def run(trials: int, seed: int, seconds: tuple[float, float] = (1.0, 3.0)
-        ) -> dict[str, list[Outcome]]:
+def run(
+    trials: int, seed: int, seconds: tuple[float, float] = (1.0, 3.0)
+) -> dict[str, list[Outcome]]:
     """``trials`` trials, each with every kind of damage; the outcomes by kind."""
     results: dict[str, list[Outcome]] = {kind: [] for kind in DAMAGE}
     for i in range(trials):
@@ -281,9 +300,11 @@ def run(trials: int, seed: int, seconds: tuple[float, float] = (1.0, 3.0)
 
 def table(results: dict[str, list[Outcome]]) -> str:
     """The trials as a Markdown table, one row per kind of damage and one for all."""
-    lines = ["| damage | trials | recovery | acknowledged after it | lost | sent again "
-             "(applied before) | applied twice | cut by the damage |",
-             "|---|---:|---|---:|---:|---:|---:|---:|"]
+    lines = [
+        "| damage | trials | recovery | acknowledged after it | lost | sent again "
+        "(applied before) | applied twice | cut by the damage |",
+        "|---|---:|---|---:|---:|---:|---:|---:|",
+    ]
     every = [o for outcomes in results.values() for o in outcomes]
     for kind, outcomes in [*results.items(), ("all", every)]:
         recoveries = sorted({o.recovery for o in outcomes})
@@ -292,7 +313,8 @@ def table(results: dict[str, list[Outcome]]) -> str:
             f"{sum(o.acknowledged for o in outcomes)} | {sum(o.lost for o in outcomes)} | "
             f"{sum(o.retried for o in outcomes)} ({sum(o.retried_applied for o in outcomes)}) | "
             f"{sum(o.twice for o in outcomes)} | "
-            f"{sum(o.cut for o in outcomes)} |")
+            f"{sum(o.cut for o in outcomes)} |"
+        )
     return "\n".join(lines)
 
 
@@ -304,8 +326,10 @@ def main() -> None:
     started = time.monotonic()
     results = run(args.trials, args.seed)
     print(table(results))  # noqa: T201
-    print(f"\n{sum(len(o) for o in results.values())} trials in "  # noqa: T201
-          f"{time.monotonic() - started:.0f} s, seed {args.seed}, {os.cpu_count()} CPUs")
+    print(
+        f"\n{sum(len(o) for o in results.values())} trials in "  # noqa: T201
+        f"{time.monotonic() - started:.0f} s, seed {args.seed}, {os.cpu_count()} CPUs"
+    )
 
 
 if __name__ == "__main__":

@@ -85,24 +85,40 @@ def main() -> None:
     torch.set_num_threads(1)
     cuda = torch.cuda.is_available()
     results: dict[str, Any] = {
-        "machine": platform.machine(), "python": platform.python_version(),
-        "torch": torch.__version__, "gpu": torch.cuda.get_device_name() if cuda else None,
-        "rounds": args.rounds, "steps": args.steps, "members": {}}
-    print(f"\n{args.rounds} rounds of {args.steps} steps; torch {torch.__version__} "
-          f"(1 CPU thread){'; ' + results['gpu'] if cuda else ''}\n")
-    print("| learners | separate (ms per step) | batched, CPU | ratio |"
-          + (" batched, CUDA graph | ratio |" if cuda else ""))
+        "machine": platform.machine(),
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "gpu": torch.cuda.get_device_name() if cuda else None,
+        "rounds": args.rounds,
+        "steps": args.steps,
+        "members": {},
+    }
+    print(
+        f"\n{args.rounds} rounds of {args.steps} steps; torch {torch.__version__} "
+        f"(1 CPU thread){'; ' + results['gpu'] if cuda else ''}\n"
+    )
+    print(
+        "| learners | separate (ms per step) | batched, CPU | ratio |"
+        + (" batched, CUDA graph | ratio |" if cuda else "")
+    )
     print("|---:|---:|---:|---:|" + ("---:|---:|" if cuda else ""))
     for members in (1, 5, 10):
-        row = {"separate_ms": statistics.median(
-                   separate_ms(members, args.steps) for _ in range(args.rounds)),
-               "cpu_ms": statistics.median(
-                   ensemble_ms(members, "cpu", args.steps) for _ in range(args.rounds))}
-        line = (f"| {members} | {row['separate_ms']:.2f} | {row['cpu_ms']:.2f} | "
-                f"{row['separate_ms'] / row['cpu_ms']:.1f}x |")
+        row = {
+            "separate_ms": statistics.median(
+                separate_ms(members, args.steps) for _ in range(args.rounds)
+            ),
+            "cpu_ms": statistics.median(
+                ensemble_ms(members, "cpu", args.steps) for _ in range(args.rounds)
+            ),
+        }
+        line = (
+            f"| {members} | {row['separate_ms']:.2f} | {row['cpu_ms']:.2f} | "
+            f"{row['separate_ms'] / row['cpu_ms']:.1f}x |"
+        )
         if cuda:
             row["cuda_ms"] = statistics.median(
-                ensemble_ms(members, "cuda", args.steps) for _ in range(args.rounds))
+                ensemble_ms(members, "cuda", args.steps) for _ in range(args.rounds)
+            )
             line += f" {row['cuda_ms']:.2f} | {row['separate_ms'] / row['cuda_ms']:.1f}x |"
         results["members"][members] = row
         print(line)

@@ -51,20 +51,24 @@ def weights(learner: Any) -> list[torch.Tensor]:
     """Every weight and target weight of a learner of either kind."""
     if hasattr(learner, "members"):
         return [*learner.actor, *learner.critic, *learner.actor_target, *learner.critic_target]
-    return [p.detach() for net in (learner.actor, learner.critic, learner.actor_target,
-                                   learner.critic_target) for p in net.parameters()]
+    return [
+        p.detach()
+        for net in (learner.actor, learner.critic, learner.actor_target, learner.critic_target)
+        for p in net.parameters()
+    ]
 
 
-def compare(learners: dict[str, Any], obs: np.ndarray, rounds: int,
-            steps: int) -> dict[str, Any]:
+def compare(learners: dict[str, Any], obs: np.ndarray, rounds: int, steps: int) -> dict[str, Any]:
     for learner in learners.values():  # warm-up: allocator, first Adam steps
         block_ms(learner, obs, 10)
     times: dict[str, list[float]] = {"other": [], "this": []}
     for r in range(rounds):
         for name in ("other", "this") if r % 2 == 0 else ("this", "other"):
             times[name].append(block_ms(learners[name], obs, steps))
-    identical = all(torch.equal(x, y) for x, y in zip(
-        weights(learners["other"]), weights(learners["this"]), strict=True))
+    identical = all(
+        torch.equal(x, y)
+        for x, y in zip(weights(learners["other"]), weights(learners["this"]), strict=True)
+    )
     return {**paired(times["other"], times["this"]), "identical": identical}
 
 
@@ -79,8 +83,10 @@ def separate(other: ModuleType, rounds: int, steps: int) -> dict[str, Any]:
 def ensembles(other: ModuleType, members: int, rounds: int, steps: int) -> dict[str, Any]:
     """A lockstep ensemble of ``members`` of each commit."""
     seeds = list(range(members))
-    learners = {"other": other.ensemble.DDPGEnsemble(CONFIG, seeds),
-                "this": this_ensemble.DDPGEnsemble(CONFIG, seeds)}
+    learners = {
+        "other": other.ensemble.DDPGEnsemble(CONFIG, seeds),
+        "this": this_ensemble.DDPGEnsemble(CONFIG, seeds),
+    }
     for learner in learners.values():
         fill(learner.members)
     return compare(learners, np.full((members, 4), 10.0, np.float32), rounds, steps)
@@ -97,17 +103,31 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as directory:
         other = load_package(args.commit, "client/agents", Path(directory))
         results: dict[str, Any] = {
-            "machine": platform.machine(), "processor": platform.processor(),
-            "python": platform.python_version(), "torch": torch.__version__,
-            "baseline": args.commit, "rounds": args.rounds, "steps": args.steps, "learners": {}}
-        print(f"\n{args.rounds} rounds of {args.steps} steps; torch {torch.__version__} "
-              f"(1 CPU thread)\n")
-        print(f"| learner | {args.commit} (ms per step) | this checkout | speed-up (paired) "
-              f"| identical weights |")
+            "machine": platform.machine(),
+            "processor": platform.processor(),
+            "python": platform.python_version(),
+            "torch": torch.__version__,
+            "baseline": args.commit,
+            "rounds": args.rounds,
+            "steps": args.steps,
+            "learners": {},
+        }
+        print(
+            f"\n{args.rounds} rounds of {args.steps} steps; torch {torch.__version__} "
+            f"(1 CPU thread)\n"
+        )
+        print(
+            f"| learner | {args.commit} (ms per step) | this checkout | speed-up (paired) "
+            f"| identical weights |"
+        )
         print("|---|---:|---:|---:|---|")
         rows = [("one run (DDPG)", lambda: separate(other, args.rounds, args.steps))] + [
-            (f"lockstep, {m} run{'s' if m > 1 else ''}",
-             lambda m=m: ensembles(other, m, args.rounds, args.steps)) for m in SIZES]
+            (
+                f"lockstep, {m} run{'s' if m > 1 else ''}",
+                lambda m=m: ensembles(other, m, args.rounds, args.steps),
+            )
+            for m in SIZES
+        ]
         for label, measure in rows:
             row = measure()
             results["learners"][label] = row

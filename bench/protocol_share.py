@@ -48,21 +48,24 @@ def main() -> None:
             spent[1] += 1
 
     Shield.step = timed  # type: ignore[method-assign]
-    config = ExperimentConfig(arms=(ARM,), runs=args.runs, episodes=args.episodes,
-                              seed=args.seed)
+    config = ExperimentConfig(arms=(ARM,), runs=args.runs, episodes=args.episodes, seed=args.seed)
     with tempfile.TemporaryDirectory() as out:
         start = time.perf_counter()
         run_lockstep(config, ARM, Path(out))
         total = time.perf_counter() - start
     shield, calls = spent
     rounds = calls / args.runs
-    print(f"{args.runs} runs x {args.episodes} episodes, seed {args.seed}, in-process shields; "
-          f"{platform.machine()}, Python {platform.python_version()}\n")
+    print(
+        f"{args.runs} runs x {args.episodes} episodes, seed {args.seed}, in-process shields; "
+        f"{platform.machine()}, Python {platform.python_version()}\n"
+    )
     print("| | seconds | per lockstep step (ms) | share |")
     print("|---|---:|---:|---:|")
     print(f"| the shielded arm | {total:.1f} | {total / rounds * 1e3:.2f} | 100% |")
-    print(f"| its shields ({calls} steps, {shield / calls * 1e6:.0f} us each) | {shield:.1f} | "
-          f"{shield / rounds * 1e3:.2f} | {shield / total:.1%} |")
+    print(
+        f"| its shields ({calls} steps, {shield / calls * 1e6:.0f} us each) | {shield:.1f} | "
+        f"{shield / rounds * 1e3:.2f} | {shield / total:.1%} |"
+    )
 
 
 if __name__ == "__main__":

@@ -51,17 +51,27 @@ def free_port() -> int:
 
 def step(t: int) -> dict[str, Any]:
     """Step ``t`` of a car following a lead smoothly (episodes of 200 steps)."""
-    return {"observation": [30.0 + 10.0 * math.sin(t / 20), 20.0 + 2.0 * math.sin(t / 30),
-                            20.0 + 2.0 * math.cos(t / 25)],
-            "action": math.sin(t / 10), "done": t % 200 == 199, "event": None}
+    return {
+        "observation": [
+            30.0 + 10.0 * math.sin(t / 20),
+            20.0 + 2.0 * math.sin(t / 30),
+            20.0 + 2.0 * math.cos(t / 25),
+        ],
+        "action": math.sin(t / 10),
+        "done": t % 200 == 199,
+        "event": None,
+    }
 
 
 def start(command: list[str]) -> tuple[subprocess.Popen[bytes], str]:
     port = free_port()
     url = f"http://127.0.0.1:{port}"
-    process = subprocess.Popen([*command, "--host", "127.0.0.1", "--port", str(port)],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                               start_new_session=True)
+    process = subprocess.Popen(
+        [*command, "--host", "127.0.0.1", "--port", str(port)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     deadline = time.monotonic() + 180
     while time.monotonic() < deadline:
         try:
@@ -103,8 +113,7 @@ def cpu_seconds(session: int) -> dict[str, float]:
     return used
 
 
-async def throughput(url: str, names: list[str], seconds: float, batch: int
-                     ) -> tuple[int, float]:
+async def throughput(url: str, names: list[str], seconds: float, batch: int) -> tuple[int, float]:
     """Steps done and seconds taken with one client a model (batches of ``batch`` when > 1)."""
     done = 0
     stop_at = time.perf_counter() + seconds
@@ -144,8 +153,13 @@ def ingress_alone(batch: int, count: int = 2000) -> float:
 
     async def requests() -> float:
         app = ingress_app(Settings(), 2, call, None)  # type: ignore[arg-type]
-        request = asgi.Request("POST", "/models/bench-0/revise/batch", b"",
-                               ((b"content-type", b"application/json"),), body)
+        request = asgi.Request(
+            "POST",
+            "/models/bench-0/revise/batch",
+            b"",
+            ((b"content-type", b"application/json"),),
+            body,
+        )
         began = time.perf_counter()
         for _ in range(count):
             await asgi.call(app, request)
@@ -160,8 +174,11 @@ def measure(command: list[str], args: argparse.Namespace) -> dict[str, float]:
         names = [f"bench-{i}" for i in range(args.clients)]
         for name in names:
             httpx.post(url + "/models", json={"name": name}, timeout=60).raise_for_status()
-        rounds: dict[str, list[float]] = {"latency_ms": [], "steps_per_s": [],
-                                          "batch_steps_per_s": []}
+        rounds: dict[str, list[float]] = {
+            "latency_ms": [],
+            "steps_per_s": [],
+            "batch_steps_per_s": [],
+        }
         cpu: dict[str, float] = {}
         steps_done = 0
         for _ in range(args.rounds):
@@ -196,34 +213,63 @@ def main() -> None:
     python = [sys.executable, "-m", "app"]
     results = {}
     with tempfile.TemporaryDirectory() as scratch:
-        servers = {"plain": [*python, "serve"],
-                   "ray, 1 shard": [*python, "serve-ray", "--shards", "1",
-                                    "--data-dir", f"{scratch}/one"],
-                   "ray, 2 shards": [*python, "serve-ray", "--shards", "2",
-                                     "--data-dir", f"{scratch}/two"],
-                   "ray, 2 shards, 2 ingresses": [*python, "serve-ray", "--shards", "2",
-                                                  "--ingresses", "2",
-                                                  "--data-dir", f"{scratch}/three"]}
+        servers = {
+            "plain": [*python, "serve"],
+            "ray, 1 shard": [*python, "serve-ray", "--shards", "1", "--data-dir", f"{scratch}/one"],
+            "ray, 2 shards": [
+                *python,
+                "serve-ray",
+                "--shards",
+                "2",
+                "--data-dir",
+                f"{scratch}/two",
+            ],
+            "ray, 2 shards, 2 ingresses": [
+                *python,
+                "serve-ray",
+                "--shards",
+                "2",
+                "--ingresses",
+                "2",
+                "--data-dir",
+                f"{scratch}/three",
+            ],
+        }
         for label, command in servers.items():
             results[label] = measure(command, args)
             print(label, {k: round(v, 2) for k, v in results[label].items()}, flush=True)
     alone = statistics.median(ingress_alone(args.batch) for _ in range(args.rounds))
     plain = results["plain"]
-    print(f"\nthe ingress's own code, in process: {alone:.0f} us a batch request "
-          f"({alone / args.batch:.1f} us a step)")
-    print(f"\n{os.cpu_count()} cores ({platform.processor() or platform.machine()}); "
-          f"{args.clients} clients, batches of {args.batch}; medians of {args.rounds} rounds\n")
-    print("| server | step latency (ms) | extra over plain (ms) | steps/s, one a request "
-          "| steps/s, batches | CPU us a batched step: proxy / ingress / shards / other |")
+    print(
+        f"\nthe ingress's own code, in process: {alone:.0f} us a batch request "
+        f"({alone / args.batch:.1f} us a step)"
+    )
+    print(
+        f"\n{os.cpu_count()} cores ({platform.processor() or platform.machine()}); "
+        f"{args.clients} clients, batches of {args.batch}; medians of {args.rounds} rounds\n"
+    )
+    print(
+        "| server | step latency (ms) | extra over plain (ms) | steps/s, one a request "
+        "| steps/s, batches | CPU us a batched step: proxy / ingress / shards / other |"
+    )
     print("|---|---:|---:|---:|---:|---|")
     for label, r in results.items():
         cpu = " / ".join(f"{r[f'cpu_us_{k}']:.0f}" for k in [*ROLES, "other"])
-        print(f"| {label} | {r['latency_ms']:.2f} | {r['latency_ms'] - plain['latency_ms']:.2f} "
-              f"| {r['steps_per_s']:.0f} | {r['batch_steps_per_s']:.0f} | {cpu} |")
+        print(
+            f"| {label} | {r['latency_ms']:.2f} | {r['latency_ms'] - plain['latency_ms']:.2f} "
+            f"| {r['steps_per_s']:.0f} | {r['batch_steps_per_s']:.0f} | {cpu} |"
+        )
     if args.out is not None:
-        args.out.write_text(json.dumps({"args": vars(args) | {"out": str(args.out)},
-                                        "results": results, "ingress_alone_us": alone},
-                                       indent=1))
+        args.out.write_text(
+            json.dumps(
+                {
+                    "args": vars(args) | {"out": str(args.out)},
+                    "results": results,
+                    "ingress_alone_us": alone,
+                },
+                indent=1,
+            )
+        )
 
 
 if __name__ == "__main__":

@@ -31,8 +31,13 @@ import app.core.shield as shield_module  # noqa: E402
 from app.core import local_risk, reach  # noqa: E402
 from bench.step_cost import SEED, build, steps, time_steps  # noqa: E402
 
-COLUMNS = ("the whole step", "clustering and recognition", "learning and the decision",
-           "the reach", "the read")
+COLUMNS = (
+    "the whole step",
+    "clustering and recognition",
+    "learning and the decision",
+    "the reach",
+    "the read",
+)
 
 
 def measure(n: int, count: int) -> dict[str, float]:
@@ -50,7 +55,7 @@ def measure(n: int, count: int) -> dict[str, float]:
     time_steps(shield, steps(200, SEED + 99, "keep"))
     first_call, compiled_call = shield_module.observe, shield_module.learn_and_decide
     code = compiled_call.py_func.__code__
-    names = code.co_varnames[:code.co_argcount]
+    names = code.co_varnames[: code.co_argcount]
 
     def timed_first(*args: Any) -> Any:
         start = time.perf_counter()
@@ -66,13 +71,36 @@ def measure(n: int, count: int) -> dict[str, float]:
         if a["decide"] and result[2]:
             out = np.empty_like(a["by_bin"])
             start = time.perf_counter()
-            reach.risk(a["dynamics"], a["peak"], a["extent"], a["index"], a["prob"], a["z"],
-                       a["midpoints"], a["safe"], a["points"], a["point_counts"], a["bounds"],
-                       a["reach_horizon"], a["reach_radius"], out)
+            reach.risk(
+                a["dynamics"],
+                a["peak"],
+                a["extent"],
+                a["index"],
+                a["prob"],
+                a["z"],
+                a["midpoints"],
+                a["safe"],
+                a["points"],
+                a["point_counts"],
+                a["bounds"],
+                a["reach_horizon"],
+                a["reach_radius"],
+                out,
+            )
             times["the reach"].append(time.perf_counter() - start)
             start = time.perf_counter()
-            local_risk._read(a["theta"], a["tried"], a["low"], a["high"], a["index"],
-                             a["prob"], a["z"], a["midpoints"], a["safe"], out)
+            local_risk._read(
+                a["theta"],
+                a["tried"],
+                a["low"],
+                a["high"],
+                a["index"],
+                a["prob"],
+                a["z"],
+                a["midpoints"],
+                a["safe"],
+                out,
+            )
             times["the read"].append(time.perf_counter() - start)
         return result
 
@@ -89,8 +117,10 @@ def main() -> None:
     parser.add_argument("--states", type=int, nargs="+", default=[10, 1000])
     parser.add_argument("--steps", type=int, default=3000)
     args = parser.parse_args()
-    print(f"seed {SEED}, keep workload, {args.steps} steps, medians; {platform.machine()}, "
-          f"Python {platform.python_version()}\n")
+    print(
+        f"seed {SEED}, keep workload, {args.steps} steps, medians; {platform.machine()}, "
+        f"Python {platform.python_version()}\n"
+    )
     print("| states | " + " | ".join(f"{name} (us)" for name in COLUMNS) + " |")
     print("|---:|" + "---:|" * len(COLUMNS))
     for n in args.states:

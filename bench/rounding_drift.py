@@ -32,8 +32,9 @@ STEPS, WINDOW, SEEDS = 300, 50, [11, 12, 13]
 CONFIG = DDPGConfig(warmup=64)
 
 
-def train_side_by_side(ensemble: DDPGEnsemble, single: list[DDPG], steps: int,
-                       noise: float = 0.0) -> tuple[list[float], npt.NDArray[np.float32]]:
+def train_side_by_side(
+    ensemble: DDPGEnsemble, single: list[DDPG], steps: int, noise: float = 0.0
+) -> tuple[list[float], npt.NDArray[np.float32]]:
     """Train the ensemble and the separate learners on the same observations and rewards,
     each from its own actions; with ``noise``, nudge the ensemble's weights after each update.
     The largest action difference of every step, and the observations that come next."""
@@ -55,8 +56,12 @@ def train_side_by_side(ensemble: DDPGEnsemble, single: list[DDPG], steps: int,
             agent.update()
         if noise and single[0].buffer.count >= CONFIG.warmup:
             with torch.no_grad():
-                for p in [*ensemble.actor, *ensemble.critic,
-                          *ensemble.actor_target, *ensemble.critic_target]:
+                for p in [
+                    *ensemble.actor,
+                    *ensemble.critic,
+                    *ensemble.actor_target,
+                    *ensemble.critic_target,
+                ]:
                     p.mul_(1 + noise * torch.randn(p.shape, generator=nudges))
         obs = following
     return worst, obs
@@ -66,14 +71,17 @@ def drift(device: str, noise: float = 0.0) -> list[float]:
     """The largest action difference in every window of ``WINDOW`` steps."""
     ensemble = DDPGEnsemble(CONFIG, SEEDS, device)
     worst, _ = train_side_by_side(ensemble, [DDPG(CONFIG, s) for s in SEEDS], STEPS, noise)
-    return [max(worst[i:i + WINDOW]) for i in range(0, STEPS, WINDOW)]
+    return [max(worst[i : i + WINDOW]) for i in range(0, STEPS, WINDOW)]
 
 
 def main() -> None:
     torch.set_num_threads(1)
     os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # as the runner: deterministic
-    rows = [("cpu", "cpu", 0.0), ("cpu + noise 6e-8", "cpu", 6e-8),
-            ("cpu + noise 3e-7", "cpu", 3e-7)]
+    rows = [
+        ("cpu", "cpu", 0.0),
+        ("cpu + noise 6e-8", "cpu", 6e-8),
+        ("cpu + noise 3e-7", "cpu", 3e-7),
+    ]
     if torch.cuda.is_available():
         rows.append(("cuda", "cuda", 0.0))
     windows = " | ".join(f"{i}-{i + WINDOW - 1}" for i in range(0, STEPS, WINDOW))

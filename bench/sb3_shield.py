@@ -43,20 +43,28 @@ def train(seed: int, steps: int, shielded: bool) -> dict[str, Any]:
     env: gym.Env[Any, Any] = gym.make("client.sim:CarFollowing-v0")
     extra: dict[str, Any] = {}
     if shielded:
-        env = ShieldWrapper(env, config=STEPS_WARMUP, warmup_steps=WARMUP_STEPS,
-                            stream=f"td3-{seed}")
+        env = ShieldWrapper(
+            env, config=STEPS_WARMUP, warmup_steps=WARMUP_STEPS, stream=f"td3-{seed}"
+        )
         extra["replay_buffer_class"] = AppliedActionReplayBuffer
     noise = NormalActionNoise(mean=np.zeros(1), sigma=np.full(1, 0.2))
-    model = TD3("MlpPolicy", env, action_noise=noise, learning_starts=1000, seed=seed,
-                device="cpu", **extra)
+    model = TD3(
+        "MlpPolicy", env, action_noise=noise, learning_starts=1000, seed=seed, device="cpu", **extra
+    )
     counter = Failures()
     start = time.perf_counter()
     model.learn(total_timesteps=steps, callback=counter)
     env.close()
-    return {"seed": seed, "shielded": shielded, "steps": steps,
-            "failures": dict(counter.failures), "total": sum(counter.failures.values()),
-            "episodes": counter.episodes, "revised": counter.revised,
-            "wall_s": round(time.perf_counter() - start, 1)}
+    return {
+        "seed": seed,
+        "shielded": shielded,
+        "steps": steps,
+        "failures": dict(counter.failures),
+        "total": sum(counter.failures.values()),
+        "episodes": counter.episodes,
+        "revised": counter.revised,
+        "wall_s": round(time.perf_counter() - start, 1),
+    }
 
 
 def main() -> None:
@@ -71,22 +79,35 @@ def main() -> None:
         for shielded in (False, True):
             row = train(seed, args.steps, shielded)
             rows.append(row)
-            print(f"seed {seed} {'shielded' if shielded else 'alone':>8}: "
-                  f"{1000 * row['total'] / args.steps:.2f} failures per 1000 steps "
-                  f"{row['failures']}, {row['episodes']} episodes, {row['revised']} revised, "
-                  f"{row['wall_s']} s", flush=True)
+            print(
+                f"seed {seed} {'shielded' if shielded else 'alone':>8}: "
+                f"{1000 * row['total'] / args.steps:.2f} failures per 1000 steps "
+                f"{row['failures']}, {row['episodes']} episodes, {row['revised']} revised, "
+                f"{row['wall_s']} s",
+                flush=True,
+            )
     alone = sum(r["total"] for r in rows if not r["shielded"])
     shielded_total = sum(r["total"] for r in rows if r["shielded"])
     steps = args.steps * len(rows) / 2
     ratio = shielded_total / alone if alone else float("nan")
-    print(f"total: alone {1000 * alone / steps:.2f}, shielded {1000 * shielded_total / steps:.2f}"
-          f" failures per 1000 steps; ratio {ratio:.2f}")
+    print(
+        f"total: alone {1000 * alone / steps:.2f}, shielded {1000 * shielded_total / steps:.2f}"
+        f" failures per 1000 steps; ratio {ratio:.2f}"
+    )
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"machine": platform.processor() or platform.machine(),
-                                        "core": compiled.version(),
-                                        "steps": args.steps, "rows": rows, "ratio": ratio},
-                                       indent=1))
+        args.out.write_text(
+            json.dumps(
+                {
+                    "machine": platform.processor() or platform.machine(),
+                    "core": compiled.version(),
+                    "steps": args.steps,
+                    "rows": rows,
+                    "ratio": ratio,
+                },
+                indent=1,
+            )
+        )
 
 
 if __name__ == "__main__":

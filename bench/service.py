@@ -49,8 +49,7 @@ def free_port() -> int:
 
 
 def start(port: int, *options: str) -> subprocess.Popen[bytes]:
-    command = [sys.executable, str(Path(__file__).with_name("service_app.py")), str(port),
-               *options]
+    command = [sys.executable, str(Path(__file__).with_name("service_app.py")), str(port), *options]
     if shutil.which("taskset"):
         command = ["taskset", "-c", "0", *command]
     process = subprocess.Popen(command)
@@ -65,8 +64,10 @@ def start(port: int, *options: str) -> subprocess.Popen[bytes]:
 
 
 def bodies(count: int, seed: int) -> list[str]:
-    return [json.dumps({"observation": z, "action": a, "stream": "bench"})
-            for z, a in steps(count, seed, "keep")]
+    return [
+        json.dumps({"observation": z, "action": a, "stream": "bench"})
+        for z, a in steps(count, seed, "keep")
+    ]
 
 
 def http_round(client: httpx.Client, path: str, payloads: list[str]) -> list[float]:
@@ -121,20 +122,27 @@ def main() -> None:
             for n in (10, 1000):
                 blob = codec.to_npz(build(n).snapshot())
                 name = f"s{n}"
-                r = client.put(f"/models/{name}", content=blob,
-                               headers={"content-type": "application/x-npz"})
+                r = client.put(
+                    f"/models/{name}", content=blob, headers={"content-type": "application/x-npz"}
+                )
                 assert r.status_code == 200, r.text
                 rounds: dict[str, list[list[float]]] = {
-                    "noop": [], "revise": [], "echo": [], "ws": [], "batch": []}
+                    "noop": [],
+                    "revise": [],
+                    "echo": [],
+                    "ws": [],
+                    "batch": [],
+                }
                 for i in range(args.rounds):
                     payloads = bodies(args.requests, SEED + i)
                     rounds["noop"].append(http_round(client, "/bench/noop", payloads))
-                    rounds["revise"].append(http_round(client, f"/models/{name}/revise",
-                                                       payloads))
-                    rounds["echo"].append(ws_round(base.replace("http", "ws") + "/bench/echo",
-                                                   payloads))
-                    rounds["ws"].append(ws_round(base.replace("http", "ws")
-                                                 + f"/models/{name}/ws", payloads))
+                    rounds["revise"].append(http_round(client, f"/models/{name}/revise", payloads))
+                    rounds["echo"].append(
+                        ws_round(base.replace("http", "ws") + "/bench/echo", payloads)
+                    )
+                    rounds["ws"].append(
+                        ws_round(base.replace("http", "ws") + f"/models/{name}/ws", payloads)
+                    )
                     batch = {"steps": [json.loads(b) for b in bodies(args.batch, SEED + i)]}
                     start_t = time.perf_counter()
                     r = client.post(f"/models/{name}/revise/batch", json=batch)
@@ -148,20 +156,28 @@ def main() -> None:
         server.wait(10)
 
     pinned = "server pinned to core 0" if shutil.which("taskset") else "server not pinned"
-    print(f"\nseed {SEED}; {args.rounds} rounds of {args.requests} sequential requests "
-          f"(batch: {args.batch} steps); medians over rounds; {pinned}; "
-          f"{platform.machine()}, Python {platform.python_version()}\n")
+    print(
+        f"\nseed {SEED}; {args.rounds} rounds of {args.requests} sequential requests "
+        f"(batch: {args.batch} steps); medians over rounds; {pinned}; "
+        f"{platform.machine()}, Python {platform.python_version()}\n"
+    )
     print("| states | route | p50 (us) | p99 (us) | per second | vs floor (p50) |")
     print("|---:|---|---:|---:|---:|---:|")
     for name, r in results.items():
         states = name[1:]
-        rows = [("no-op route (floor)", "noop", None), ("POST /revise", "revise", "noop"),
-                ("WebSocket echo (floor)", "echo", None), ("WebSocket step", "ws", "echo"),
-                ("batch route, per step", "batch", None)]
+        rows = [
+            ("no-op route (floor)", "noop", None),
+            ("POST /revise", "revise", "noop"),
+            ("WebSocket echo (floor)", "echo", None),
+            ("WebSocket step", "ws", "echo"),
+            ("batch route, per step", "batch", None),
+        ]
         for label, key, floor in rows:
             ratio = f"{r[key]['p50_us'] / r[floor]['p50_us']:.2f}x" if floor else ""
-            print(f"| {states} | {label} | {r[key]['p50_us']:.0f} | {r[key]['p99_us']:.0f} "
-                  f"| {r[key]['per_s']:.0f} | {ratio} |")
+            print(
+                f"| {states} | {label} | {r[key]['p50_us']:.0f} | {r[key]['p99_us']:.0f} "
+                f"| {r[key]['per_s']:.0f} | {ratio} |"
+            )
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
 

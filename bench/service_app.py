@@ -69,5 +69,10 @@ def time_model_steps() -> list[float]:
 
 
 if __name__ == "__main__":
-    uvicorn.run(build("--timing" in sys.argv), host="127.0.0.1", port=int(sys.argv[1]),
-                log_level="warning", access_log=False)
+    uvicorn.run(
+        build("--timing" in sys.argv),
+        host="127.0.0.1",
+        port=int(sys.argv[1]),
+        log_level="warning",
+        access_log=False,
+    )

@@ -51,8 +51,13 @@ print(json.dumps(out))
 
 def loop_medians(n: int, rounds: int, requests: int) -> list[float]:
     """Per round, the median seconds of a step in a plain loop, pinned beside the server."""
-    code = LOOP.format(root=str(Path(__file__).resolve().parents[1]), n=n, rounds=rounds,
-                       requests=requests, seed=SEED)
+    code = LOOP.format(
+        root=str(Path(__file__).resolve().parents[1]),
+        n=n,
+        rounds=rounds,
+        requests=requests,
+        seed=SEED,
+    )
     command = [sys.executable, "-c", code]
     if shutil.which("taskset"):
         command = ["taskset", "-c", "0", *command]
@@ -78,32 +83,37 @@ def main() -> None:
                 blob = codec.to_npz(build(n).snapshot())
                 echo, step, inside = [], [], []
                 for i in range(args.rounds):
-                    r = client.put(f"/models/s{n}", content=blob,
-                                   headers={"content-type": "application/x-npz"})
+                    r = client.put(
+                        f"/models/s{n}", content=blob, headers={"content-type": "application/x-npz"}
+                    )
                     assert r.status_code == 200, r.text
                     payloads = bodies(args.requests, SEED + i)
                     echo.append(statistics.median(ws_round(ws_base + "/bench/echo", payloads)))
                     client.get("/bench/timing")  # drop the times of anything before
-                    step.append(statistics.median(ws_round(ws_base + f"/models/s{n}/ws",
-                                                           payloads)))
+                    step.append(statistics.median(ws_round(ws_base + f"/models/s{n}/ws", payloads)))
                     inside.append(statistics.median(client.get("/bench/timing").json()))
                 loop = loop_medians(n, args.rounds, args.requests)
-                rows.append((n, *(statistics.median(v) * 1e6
-                                  for v in (echo, step, inside, loop))))
+                rows.append((n, *(statistics.median(v) * 1e6 for v in (echo, step, inside, loop))))
     finally:
         server.terminate()
         server.wait(10)
 
     pinned = "server pinned to core 0" if shutil.which("taskset") else "server not pinned"
-    print(f"\nseed {SEED}; {args.rounds} rounds of {args.requests} WebSocket steps; medians "
-          f"over rounds of per-step medians (us); {pinned}; {platform.machine()}, "
-          f"Python {platform.python_version()}\n")
-    print("| states | WebSocket echo | WebSocket step | model step in the server "
-          "| rest of the step over the echo | the same steps in a loop |")
+    print(
+        f"\nseed {SEED}; {args.rounds} rounds of {args.requests} WebSocket steps; medians "
+        f"over rounds of per-step medians (us); {pinned}; {platform.machine()}, "
+        f"Python {platform.python_version()}\n"
+    )
+    print(
+        "| states | WebSocket echo | WebSocket step | model step in the server "
+        "| rest of the step over the echo | the same steps in a loop |"
+    )
     print("|---:|---:|---:|---:|---:|---:|")
     for n, echo_us, step_us, inside_us, loop_us in rows:
-        print(f"| {n} | {echo_us:.0f} | {step_us:.0f} | {inside_us:.0f} "
-              f"| {step_us - echo_us - inside_us:.0f} | {loop_us:.0f} |")
+        print(
+            f"| {n} | {echo_us:.0f} | {step_us:.0f} | {inside_us:.0f} "
+            f"| {step_us - echo_us - inside_us:.0f} | {loop_us:.0f} |"
+        )
 
 
 if __name__ == "__main__":

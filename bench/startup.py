@@ -28,8 +28,11 @@ def free_port() -> int:
 def serve_seconds() -> float:
     port = free_port()
     start = time.perf_counter()
-    process = subprocess.Popen([sys.executable, "-m", "app", "serve", "--port", str(port)],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "app", "serve", "--port", str(port)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         while True:
             try:
@@ -44,8 +47,9 @@ def serve_seconds() -> float:
 
 def import_seconds() -> float:
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import app.main, app.core.compiled, uvicorn"],
-                   check=True)
+    subprocess.run(
+        [sys.executable, "-c", "import app.main, app.core.compiled, uvicorn"], check=True
+    )
     return time.perf_counter() - start
 
 
@@ -56,13 +60,15 @@ def main() -> None:
     subprocess.run([sys.executable, "-m", "app", "warm"], check=True, capture_output=True)
     serve = statistics.median(serve_seconds() for _ in range(args.rounds))
     floor = statistics.median(import_seconds() for _ in range(args.rounds))
-    print(f"{args.rounds} rounds, medians; {platform.machine()}, Python "
-          f"{platform.python_version()}\n")
+    print(
+        f"{args.rounds} rounds, medians; {platform.machine()}, Python {platform.python_version()}\n"
+    )
     print("| start-up, cache warm | seconds | x import floor |")
     print("|---|---:|---:|")
     print(f"| import the app (floor) | {floor:.2f} | |")
-    print(f"| `python -m app serve` to the first /readyz 200 | {serve:.2f} | "
-          f"{serve / floor:.2f}x |")
+    print(
+        f"| `python -m app serve` to the first /readyz 200 | {serve:.2f} | {serve / floor:.2f}x |"
+    )
 
 
 if __name__ == "__main__":

@@ -42,8 +42,7 @@ SEED = 0
 CRITERIA = ("collision", "large_distance")
 
 
-def build(n: int, seed: int = SEED, reach_horizon: int = RiskConfig().reach_horizon
-          ) -> Shield:
+def build(n: int, seed: int = SEED, reach_horizon: int = RiskConfig().reach_horizon) -> Shield:
     """A default shield of n states with a learned history, the reviser active."""
     config = ShieldConfig(
         reviser=ReviserConfig(seed=seed, activate_after_episodes=0),
@@ -67,8 +66,9 @@ def build(n: int, seed: int = SEED, reach_horizon: int = RiskConfig().reach_hori
         shield.local_risk.learn(0, prev, before, action, failure, ended=False)
         # the reach's failures lie where failures lie in a world: at an edge of the space
         edge = 0 if z[1] < 0.03 else 1 if z[1] > 0.97 else None
-        shield.local_risk.learn_motion(prev, before, action, z,
-                                       edge if rng.random() < 0.2 else None)
+        shield.local_risk.learn_motion(
+            prev, before, action, z, edge if rng.random() < 0.2 else None
+        )
         prev = belief
     shield.local_risk.forget(0)  # the slot the shield's first stream takes
     return shield
@@ -101,8 +101,12 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[10, 1000, 5000])
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=5000)
-    parser.add_argument("--reach-horizon", type=int, default=RiskConfig().reach_horizon,
-                        help="the reach's rollout (0: the local model alone)")
+    parser.add_argument(
+        "--reach-horizon",
+        type=int,
+        default=RiskConfig().reach_horizon,
+        help="the reach's rollout (0: the local model alone)",
+    )
     args = parser.parse_args()
     rows: list[dict[str, Any]] = []
     for n in args.sizes:
@@ -116,17 +120,23 @@ def main() -> None:
                 times.append(t)
             row[workload] = (statistics.median(times) * 1e6, share)
         rows.append(row)
-    print(f"seed {SEED}, reach horizon {args.reach_horizon}; {args.rounds} rounds of "
-          f"{args.steps} steps; "
-          f"median of round means; {platform.machine()}, numpy {np.__version__}, "
-          f"Python {platform.python_version()}\n")
-    print("| states | keep: step (us) | x smallest | revised | revise: step (us) | x smallest "
-          "| revised |")
+    print(
+        f"seed {SEED}, reach horizon {args.reach_horizon}; {args.rounds} rounds of "
+        f"{args.steps} steps; "
+        f"median of round means; {platform.machine()}, numpy {np.__version__}, "
+        f"Python {platform.python_version()}\n"
+    )
+    print(
+        "| states | keep: step (us) | x smallest | revised | revise: step (us) | x smallest "
+        "| revised |"
+    )
     print("|---:|---:|---:|---:|---:|---:|---:|")
     base = rows[0]
     for row in rows:
-        cells = [f"{row[w][0]:.1f} | {row[w][0] / base[w][0]:.2f} | {row[w][1]:.0%}"
-                 for w in ("keep", "revise")]
+        cells = [
+            f"{row[w][0]:.1f} | {row[w][0] / base[w][0]:.2f} | {row[w][1]:.0%}"
+            for w in ("keep", "revise")
+        ]
         print(f"| {row['states']} | " + " | ".join(cells) + " |")
 
 

@@ -45,16 +45,19 @@ def upload(base: str, names: list[str]) -> None:
     blob = codec.to_npz(variant(build(10), "inspect"))
     with httpx.Client(base_url=base, timeout=60) as admin:
         for name in names:
-            response = admin.put(f"/models/{name}", content=blob,
-                                 headers={"content-type": "application/x-npz"})
+            response = admin.put(
+                f"/models/{name}", content=blob, headers={"content-type": "application/x-npz"}
+            )
             response.raise_for_status()
 
 
 def single(shield: ModuleType, base: str, who: str) -> Callable[[int, int], list[Any]]:
     """One client for every round: each call gives a block's single-step requests."""
     client = shield.ShieldClient(base, model=f"{who}-single")
-    return lambda block, seed: [lambda z=z, a=a: client.revise(z, a, stream="bench")
-                                for z, a in steps(block, seed, "inspect")]
+    return lambda block, seed: [
+        lambda z=z, a=a: client.revise(z, a, stream="bench")
+        for z, a in steps(block, seed, "inspect")
+    ]
 
 
 def batch(shield: ModuleType, base: str, who: str) -> Callable[[int, int], list[Any]]:
@@ -64,9 +67,12 @@ def batch(shield: ModuleType, base: str, who: str) -> Callable[[int, int], list[
 
     def block_of(block: int, seed: int) -> list[Callable[[], Any]]:
         work = [steps(block, seed + 1000 * k, "inspect") for k in range(MODELS)]
-        return [lambda i=i: carrier.revise_many(
-            [(f"{who}-{k}", body(*work[k][i], stream="bench")) for k in range(MODELS)])
-            for i in range(block)]
+        return [
+            lambda i=i: carrier.revise_many(
+                [(f"{who}-{k}", body(*work[k][i], stream="bench")) for k in range(MODELS)]
+            )
+            for i in range(block)
+        ]
 
     return block_of
 
@@ -83,20 +89,25 @@ def main() -> None:
     port = free_port()
     server = start(port)
     base = f"http://127.0.0.1:{port}"
-    kinds = {"one step a request (ShieldClient.revise)": (single, args.requests),
-             f"a step of {MODELS} models a request (BatchShield.revise_many)":
-                 (batch, args.batches)}
+    kinds = {
+        "one step a request (ShieldClient.revise)": (single, args.requests),
+        f"a step of {MODELS} models a request (BatchShield.revise_many)": (batch, args.batches),
+    }
     try:
         with tempfile.TemporaryDirectory() as directory:
-            clients = {"other": load_package(args.commit, "client/shield", Path(directory)),
-                       "this": this_shield}
+            clients = {
+                "other": load_package(args.commit, "client/shield", Path(directory)),
+                "this": this_shield,
+            }
             upload(base, [f"{who}-{m}" for who in clients for m in ["single", *range(MODELS)]])
-            times: dict[str, dict[str, list[float]]] = {k: {"other": [], "this": []}
-                                                        for k in kinds}
-            decisions: dict[str, dict[str, list[Any]]] = {k: {"other": [], "this": []}
-                                                          for k in kinds}
-            requests = {kind: {who: make(clients[who], base, who) for who in clients}
-                        for kind, (make, _) in kinds.items()}
+            times: dict[str, dict[str, list[float]]] = {k: {"other": [], "this": []} for k in kinds}
+            decisions: dict[str, dict[str, list[Any]]] = {
+                k: {"other": [], "this": []} for k in kinds
+            }
+            requests = {
+                kind: {who: make(clients[who], base, who) for who in clients}
+                for kind, (make, _) in kinds.items()
+            }
             for r in range(args.rounds):
                 order = ("other", "this") if r % 2 == 0 else ("this", "other")
                 for kind, (_, size) in kinds.items():
@@ -113,14 +124,24 @@ def main() -> None:
         server.kill()
 
     results: dict[str, Any] = {
-        "machine": platform.machine(), "processor": platform.processor(),
-        "python": platform.python_version(), "httpx": httpx.__version__,
-        "baseline": args.commit, "rounds": args.rounds, "requests": args.requests,
-        "batches": args.batches, "kinds": {}}
-    print(f"\n{args.rounds} rounds; seed {SEED}; models of 10 states; server pinned to core 0; "
-          f"httpx {httpx.__version__}\n")
-    print(f"| requests | {args.commit} (ms a request) | this checkout | speed-up (paired) "
-          f"| same decisions |")
+        "machine": platform.machine(),
+        "processor": platform.processor(),
+        "python": platform.python_version(),
+        "httpx": httpx.__version__,
+        "baseline": args.commit,
+        "rounds": args.rounds,
+        "requests": args.requests,
+        "batches": args.batches,
+        "kinds": {},
+    }
+    print(
+        f"\n{args.rounds} rounds; seed {SEED}; models of 10 states; server pinned to core 0; "
+        f"httpx {httpx.__version__}\n"
+    )
+    print(
+        f"| requests | {args.commit} (ms a request) | this checkout | speed-up (paired) "
+        f"| same decisions |"
+    )
     print("|---|---:|---:|---:|---|")
     for kind, t in times.items():
         same = decisions[kind]["other"] == decisions[kind]["this"]

@@ -18,9 +18,11 @@ def load_package(commit: str, path: str, directory: Path) -> ModuleType:
     """The package at ``path`` (for example ``client/agents``) as it was at ``commit``, as a
     package of its own in ``directory`` whose modules import each other, not this
     checkout's; every module imported."""
+
     def git(*args: str) -> str:
-        return subprocess.run(["git", *args], cwd=ROOT, check=True, capture_output=True,
-                              text=True).stdout
+        return subprocess.run(
+            ["git", *args], cwd=ROOT, check=True, capture_output=True, text=True
+        ).stdout
 
     dotted = path.replace("/", ".")
     name = f"{path.rsplit('/', 1)[-1]}_{commit}"
@@ -30,8 +32,11 @@ def load_package(commit: str, path: str, directory: Path) -> ModuleType:
     for file in git("ls-tree", "--name-only", f"{commit}:{path}").split():
         if file.endswith(".py"):
             source = git("show", f"{commit}:{path}/{file}")
-            (package / file).write_text(source.replace(f"{dotted}.", f"{name}.")
-                                        .replace(f"from {dotted} import", f"from {name} import"))
+            (package / file).write_text(
+                source.replace(f"{dotted}.", f"{name}.").replace(
+                    f"from {dotted} import", f"from {name} import"
+                )
+            )
             modules.append(file.removesuffix(".py"))
     sys.path.insert(0, str(directory))
     loaded = importlib.import_module(name)
@@ -44,13 +49,17 @@ def load_package(commit: str, path: str, directory: Path) -> ModuleType:
 def paired(other: list[float], this: list[float], unit: float = 1.0) -> dict[str, Any]:
     """Each commit's median over rounds (times ``unit``) and the median of the rounds'
     ratios, other over this: the speed-up of this checkout."""
-    return {"other_ms": statistics.median(other) * unit,
-            "this_ms": statistics.median(this) * unit,
-            "speed_up": statistics.median(o / t for o, t in zip(other, this, strict=True)),
-            "rounds": {"other": other, "this": this}}
+    return {
+        "other_ms": statistics.median(other) * unit,
+        "this_ms": statistics.median(this) * unit,
+        "speed_up": statistics.median(o / t for o, t in zip(other, this, strict=True)),
+        "rounds": {"other": other, "this": this},
+    }
 
 
 def table_row(label: str, row: dict[str, Any], same: bool) -> str:
     """A Markdown row of :func:`paired`'s result and whether both commits gave the same."""
-    return (f"| {label} | {row['other_ms']:.2f} | {row['this_ms']:.2f} | "
-            f"{row['speed_up']:.2f}x | {'yes' if same else 'no'} |")
+    return (
+        f"| {label} | {row['other_ms']:.2f} | {row['this_ms']:.2f} | "
+        f"{row['speed_up']:.2f}x | {'yes' if same else 'no'} |"
+    )

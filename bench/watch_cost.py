@@ -36,8 +36,17 @@ def main() -> None:
     quiet.open()
     watched.open()
     watched.watch("default", lambda event: None)
-    check = min(timeit.repeat("m.watchers and None", globals={"m": quiet.get("default")},
-                              number=1_000_000, repeat=5)) / 1_000_000
+    check = (
+        min(
+            timeit.repeat(
+                "m.watchers and None",
+                globals={"m": quiet.get("default")},
+                number=1_000_000,
+                repeat=5,
+            )
+        )
+        / 1_000_000
+    )
     no_watcher = statistics.median(per_step(quiet, r) for r in range(ROUNDS))
     one_watcher = statistics.median(per_step(watched, r) for r in range(ROUNDS))
     print(f"\n{ROUNDS} rounds of {STEPS} steps, seed 0..{ROUNDS - 1}\n")
@@ -46,8 +55,7 @@ def main() -> None:
     print(f"| the empty-list test a step pays when nobody watches | {check * 1e9:.0f} ns |")
     print(f"| registry step, nobody watching | {no_watcher * 1e6:.1f} us |")
     print(f"| registry step, one watcher | {one_watcher * 1e6:.1f} us |")
-    print(f"\nshare of a step spent on the live view when nobody watches: "
-          f"{check / no_watcher:.4%}")
+    print(f"\nshare of a step spent on the live view when nobody watches: {check / no_watcher:.4%}")
 
 
 if __name__ == "__main__":

@@ -53,12 +53,16 @@ def main() -> None:
                 failures[info["event"][i]] = failures.get(info["event"][i], 0) + 1
         if time.monotonic() >= next_report:
             next_report = time.monotonic() + EVERY_S
-            say(f"  {step + 1}/{args.steps} steps, failures {failures}, "
-                f"{time.monotonic() - start:.0f} s")
+            say(
+                f"  {step + 1}/{args.steps} steps, failures {failures}, "
+                f"{time.monotonic() - start:.0f} s"
+            )
     core = envs.shield.shield  # type: ignore[attr-defined]
-    say(f"{envs.num_envs} copies, one model: {core.counters.steps} steps, {core.n_states} "
-          f"states, {core.counters.episodes} episodes ended, failures {failures}, "
-          f"revisions {dict(core.counters.interventions)}")
+    say(
+        f"{envs.num_envs} copies, one model: {core.counters.steps} steps, {core.n_states} "
+        f"states, {core.counters.episodes} episodes ended, failures {failures}, "
+        f"revisions {dict(core.counters.interventions)}"
+    )
     envs.close()
 
 

@@ -28,8 +28,9 @@ EVERY_S = 30.0  # [s] between progress lines
 say = partial(print, flush=True)
 
 
-def overspeed(observation: Any, reward: float, terminated: bool, truncated: bool,
-              info: dict[str, Any]) -> str | None:
+def overspeed(
+    observation: Any, reward: float, terminated: bool, truncated: bool, info: dict[str, Any]
+) -> str | None:
     """The failure of a step, if any: its name says which way the torque should go."""
     if observation[2] > LIMIT:
         return "overspeed_ccw"  # less torque moves away from it
@@ -71,11 +72,14 @@ def main() -> None:
     say(f"  ready in {compiled.warm().seconds:.0f} s")
     plain = gym.make("Pendulum-v1")
     revising = ShieldConfig(reviser=ReviserConfig(activate_after_episodes=args.warmup))
-    config = config_for(plain, {"overspeed_ccw": "decrease", "overspeed_cw": "increase"},
-                        base=revising)
+    config = config_for(
+        plain, {"overspeed_ccw": "decrease", "overspeed_cw": "increase"}, base=revising
+    )
     shielded = ShieldWrapper(gym.make("Pendulum-v1"), config=config, failure=overspeed)
-    say(f"the energy pump for {args.episodes} episodes, alone then shielded (the shield "
-        f"revises after episode {args.warmup})")
+    say(
+        f"the energy pump for {args.episodes} episodes, alone then shielded (the shield "
+        f"revises after episode {args.warmup})"
+    )
     alone = run(plain, args.episodes, args.warmup, args.seed, "alone")
     with_shield = run(shielded, args.episodes, args.warmup, args.seed, "shielded")
     say(f"overspeed steps per 1000: alone {alone:.1f}, shielded {with_shield:.1f}")

@@ -43,13 +43,24 @@ def start_service(stack: ExitStack) -> str:
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
-    server = subprocess.Popen([sys.executable, "-m", "app", "serve", "--host", "127.0.0.1",
-                               "--port", str(port), "--log-level", "warning"])
+    server = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "app",
+            "serve",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--log-level",
+            "warning",
+        ]
+    )
     stack.callback(server.wait)
     stack.callback(server.terminate)
     url = f"http://127.0.0.1:{port}"
-    say(f"starting the shield service at {url} (a first start compiles its core: a minute "
-        f"or two)")
+    say(f"starting the shield service at {url} (a first start compiles its core: a minute or two)")
     start = time.monotonic()
     next_report = start + 30.0
     while time.monotonic() - start < START_S:
@@ -85,11 +96,18 @@ def main() -> None:
                     raise
         shield = stack.enter_context(ShieldSession(url, token=args.token, model=MODEL))
         env = ShieldWrapper(gym.make("client.sim:CarFollowing-v0"), shield, stream="td3-0")
-        model = TD3("MlpPolicy", env, learning_starts=500, seed=0, device="cpu",
-                    replay_buffer_class=AppliedActionReplayBuffer)
+        model = TD3(
+            "MlpPolicy",
+            env,
+            learning_starts=500,
+            seed=0,
+            device="cpu",
+            replay_buffer_class=AppliedActionReplayBuffer,
+        )
         say(f"TD3 for {args.steps} steps, each revised by the service")
-        model.learn(total_timesteps=args.steps,
-                    callback=Failures(report=lambda line: say(f"  {line}")))
+        model.learn(
+            total_timesteps=args.steps, callback=Failures(report=lambda line: say(f"  {line}"))
+        )
         env.close()  # ends the open episode's stream; the session is the stack's to close
         with ShieldClient(url, token=args.token) as admin:
             summary = next(m for m in admin.models() if m["name"] == MODEL)

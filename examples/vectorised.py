@@ -35,16 +35,29 @@ def main() -> None:
     say("loading the shield's compiled core (a first run compiles it: a minute or two)")
     say(f"  ready in {compiled.warm().seconds:.0f} s")
     shield = LocalShield()  # the car-following defaults
-    env = make_vec_env(CarFollowingEnv, n_envs=4, seed=0, wrapper_class=ShieldWrapper,
-                       wrapper_kwargs={"shield": shield})
-    model = TD3("MlpPolicy", env, learning_starts=500, seed=0, device="cpu",
-                replay_buffer_class=AppliedActionReplayBuffer)
+    env = make_vec_env(
+        CarFollowingEnv,
+        n_envs=4,
+        seed=0,
+        wrapper_class=ShieldWrapper,
+        wrapper_kwargs={"shield": shield},
+    )
+    model = TD3(
+        "MlpPolicy",
+        env,
+        learning_starts=500,
+        seed=0,
+        device="cpu",
+        replay_buffer_class=AppliedActionReplayBuffer,
+    )
     say(f"TD3 for {args.steps} steps over 4 copies")
     model.learn(total_timesteps=args.steps, callback=Failures(report=lambda line: say(f"  {line}")))
     core = shield.shield
-    say(f"one model, {len(core.streams)} open streams, {core.counters.steps} steps, "
+    say(
+        f"one model, {len(core.streams)} open streams, {core.counters.steps} steps, "
         f"{core.n_states} states, {core.counters.episodes} episodes ended, "
-        f"revisions {dict(core.counters.interventions)}")
+        f"revisions {dict(core.counters.interventions)}"
+    )
     env.close()
 
 

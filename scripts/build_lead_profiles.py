@@ -48,9 +48,24 @@ def fetch_wheel(directory: Path) -> Path:
     requirements = directory / "requirements.txt"
     requirements.write_text(f"{WHEEL} --hash=sha256:{SHA256}\n")
     subprocess.run(
-        [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps", "--only-binary=:all:",
-         "--python-version", "3.10", "--platform", "manylinux2014_x86_64",
-         "--require-hashes", "-r", str(requirements), "-d", str(directory)],
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "download",
+            "--quiet",
+            "--no-deps",
+            "--only-binary=:all:",
+            "--python-version",
+            "3.10",
+            "--platform",
+            "manylinux2014_x86_64",
+            "--require-hashes",
+            "-r",
+            str(requirements),
+            "-d",
+            str(directory),
+        ],
         check=True,
     )
     [wheel] = directory.glob("fastsim-2.1.2-*.whl")
@@ -95,15 +110,21 @@ def build(wheel: Path) -> dict[str, np.ndarray]:
     vehicles: list[str] = []
     offset = 0
     with zipfile.ZipFile(wheel) as archive:
-        names = sorted(n for n in archive.namelist()
-                       if n.startswith(PREFIX) and n.endswith(".csv")
-                       and not n.endswith("trips.csv"))
+        names = sorted(
+            n
+            for n in archive.namelist()
+            if n.startswith(PREFIX) and n.endswith(".csv") and not n.endswith("trips.csv")
+        )
         for name in names:
-            vehicle = name[len(PREFIX):].split("/")[0]
+            vehicle = name[len(PREFIX) :].split("/")[0]
             if vehicle not in vehicles:
                 vehicles.append(vehicle)
-            table = np.genfromtxt(io.BytesIO(archive.read(name)), delimiter=",", names=True,
-                                  usecols=("timestep", "speed_mph"))
+            table = np.genfromtxt(
+                io.BytesIO(archive.read(name)),
+                delimiter=",",
+                names=True,
+                usecols=("timestep", "speed_mph"),
+            )
             for trip in rebuild_trips(table["timestep"], table["speed_mph"]):
                 v = smooth(np.clip(trip * MPH, 0.0, V_MAX))
                 speeds.append(v.astype(np.float32))
@@ -145,9 +166,11 @@ def main() -> None:
     np.savez_compressed(OUT / "lead_profiles.npz", **data)
     lengths = np.diff(np.append(data["trip_start"], len(data["speed"]))) - 1  # durations [s]
     held = data["evaluation"][data["trip_vehicle"]]
-    print(f"{len(lengths)} trips, {lengths.sum() / 3600:.1f} h from {len(data['vehicle'])} "
-          f"vehicles; evaluation: {held.sum()} trips, {lengths[held].sum() / 3600:.1f} h; "
-          f"{(OUT / 'lead_profiles.npz').stat().st_size / 1e6:.2f} MB")
+    print(
+        f"{len(lengths)} trips, {lengths.sum() / 3600:.1f} h from {len(data['vehicle'])} "
+        f"vehicles; evaluation: {held.sum()} trips, {lengths[held].sum() / 3600:.1f} h; "
+        f"{(OUT / 'lead_profiles.npz').stat().st_size / 1e6:.2f} MB"
+    )
 
 
 if __name__ == "__main__":

@@ -76,9 +76,11 @@ def _comments(cls: type[Any]) -> dict[str, str]:
     """The comment on each field: the comment lines just above it, then the one ending its line
     (units, the paper's name of the value, the reading of the paper's gap: A1-A16)."""
     source = textwrap.dedent(inspect.getsource(cls))
-    inline = {token.start[0]: token.string.lstrip("# ").strip()
-              for token in tokenize.generate_tokens(io.StringIO(source).readline)
-              if token.type == tokenize.COMMENT}
+    inline = {
+        token.start[0]: token.string.lstrip("# ").strip()
+        for token in tokenize.generate_tokens(io.StringIO(source).readline)
+        if token.type == tokenize.COMMENT
+    }
     found: dict[str, str] = {}
     above: list[str] = []
     for number, line in enumerate(source.splitlines(), start=1):
@@ -129,12 +131,17 @@ def _checks(cls: type[Any]) -> dict[str, list[str]]:
     # `for name, values in (("weights", ...), ("divide_by", ...)):` checks each named field
     looped: dict[str, list[str]] = {}
     for node in ast.walk(tree):
-        if (isinstance(node, ast.For) and isinstance(node.target, ast.Tuple)
-                and isinstance(node.target.elts[0], ast.Name)
-                and isinstance(node.iter, ast.Tuple)):
+        if (
+            isinstance(node, ast.For)
+            and isinstance(node.target, ast.Tuple)
+            and isinstance(node.target.elts[0], ast.Name)
+            and isinstance(node.iter, ast.Tuple)
+        ):
             looped[node.target.elts[0].id] = [
-                str(item.elts[0].value) for item in node.iter.elts
-                if isinstance(item, ast.Tuple) and isinstance(item.elts[0], ast.Constant)]
+                str(item.elts[0].value)
+                for item in node.iter.elts
+                if isinstance(item, ast.Tuple) and isinstance(item.elts[0], ast.Constant)
+            ]
     rules: dict[str, list[str]] = {}
     for node in ast.walk(tree):
         if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):
@@ -144,8 +151,10 @@ def _checks(cls: type[Any]) -> dict[str, list[str]]:
             field, rule = _field_of(args[1]), _text(args[2])
         elif name == "_check_range" and len(args) == 3:
             field = _field_of(args[2])
-            rule = (f"low and high finite within +-{config.MAX_PHYSICAL:g}, high - low at least "
-                    f"{config.MIN_SPAN:g}")
+            rule = (
+                f"low and high finite within +-{config.MAX_PHYSICAL:g}, high - low at least "
+                f"{config.MIN_SPAN:g}"
+            )
         elif name == "_check_name" and len(args) == 2:
             field, rule = _field_of(args[1]), f"1 to {config.MAX_NAME} characters"
         else:
@@ -161,13 +170,16 @@ def _section(path: str, cls: type[Any]) -> list[str]:
     checks = _checks(cls)
     doc = inspect.getdoc(cls) or ""
     lines = [f"## `{path}` ({cls.__name__})", "", doc, ""]
-    lines += ["| field | type | default | notes | checked on construction |",
-              "|---|---|---|---|---|"]
+    lines += [
+        "| field | type | default | notes | checked on construction |",
+        "|---|---|---|---|---|",
+    ]
     for f in dataclasses.fields(cls):
         rules = "; ".join(checks.pop(f.name, [])) or ""
         note = comments.get(f.name, "").replace("|", "\\|")
-        lines.append(f"| `{f.name}` | {_type_name(hints[f.name])} | {_default(f)} | {note} "
-                     f"| {rules} |")
+        lines.append(
+            f"| `{f.name}` | {_type_name(hints[f.name])} | {_default(f)} | {note} | {rules} |"
+        )
     if checks:  # checks across fields (their first field's name is not a field of its own)
         lines += ["", "Also checked: " + "; ".join(r for rs in checks.values() for r in rs) + "."]
     return lines + [""]
@@ -183,7 +195,7 @@ def render() -> str:
         "     run `.venv/bin/python scripts/config_reference.py` after changing them. -->",
         "",
         f"A model's configuration is one `ShieldConfig` (`app/core/config.py`), stored as JSON "
-        f"with `\"version\": {config.CONFIG_VERSION}`; over HTTP it is the body's `config` "
+        f'with `"version": {config.CONFIG_VERSION}`; over HTTP it is the body\'s `config` '
         "(`docs/api.md`). Every field may be left out and takes the default below; a value "
         "outside its range is refused with the dotted field at fault (`InvalidConfig`, over "
         "HTTP 422 `invalid_config`). `ShieldConfig.paper()` and `ShieldConfig.paper_literal()` "
@@ -199,10 +211,22 @@ def render() -> str:
     for f in dataclasses.fields(whole):
         rules = "; ".join(checks.pop(f.name, []))
         lines.append(f"| `{f.name}` | {_type_name(hints[f.name])} | {_default(f)} | {rules} |")
-    lines += ["", "The default criteria: " + ", ".join(
-        f"`{c.name}` ({c.direction}" + (f", bound {c.bound.observation} below {c.bound.below:g}"
-                                         if c.bound and c.bound.below is not None else "") + ")"
-        for c in config.PAPER_CRITERIA) + ".", ""]
+    lines += [
+        "",
+        "The default criteria: "
+        + ", ".join(
+            f"`{c.name}` ({c.direction}"
+            + (
+                f", bound {c.bound.observation} below {c.bound.below:g}"
+                if c.bound and c.bound.below is not None
+                else ""
+            )
+            + ")"
+            for c in config.PAPER_CRITERIA
+        )
+        + ".",
+        "",
+    ]
     for path, cls in SECTIONS:
         lines += _section(path, cls)
     return "\n".join(lines).rstrip("\n") + "\n"
@@ -210,8 +234,11 @@ def render() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--check", action="store_true",
-                        help="exit 1 when docs/configuration.md differs instead of writing it")
+    parser.add_argument(
+        "--check",
+        action="store_true",
+        help="exit 1 when docs/configuration.md differs instead of writing it",
+    )
     args = parser.parse_args(argv)
     text = render()
     if args.check:

@@ -67,16 +67,30 @@ class Server:
                 self.kill()
 
 
-def start_server(data_dir: Path, *args: str, env: dict[str, str] | None = None,
-                 wrapper: Sequence[str] = ()) -> Server:
+def start_server(
+    data_dir: Path, *args: str, env: dict[str, str] | None = None, wrapper: Sequence[str] = ()
+) -> Server:
     """``python -m app serve`` on a free port (run by ``wrapper``, as ``prlimit --as=...``,
     if given); returns once /readyz answers 200."""
     port = free_port()
     log = data_dir.parent / f"server-{port}.log"
-    command = [*wrapper, sys.executable, "-m", "app", "serve", "--host", "127.0.0.1",
-               "--port", str(port), "--data-dir", str(data_dir), *args]
-    process = subprocess.Popen(command, stdout=open(log, "wb"), stderr=subprocess.STDOUT,
-                               env={**os.environ, **(env or {})})
+    command = [
+        *wrapper,
+        sys.executable,
+        "-m",
+        "app",
+        "serve",
+        "--host",
+        "127.0.0.1",
+        "--port",
+        str(port),
+        "--data-dir",
+        str(data_dir),
+        *args,
+    ]
+    process = subprocess.Popen(
+        command, stdout=open(log, "wb"), stderr=subprocess.STDOUT, env={**os.environ, **(env or {})}
+    )
     url = f"http://127.0.0.1:{port}"
     deadline = time.monotonic() + 300  # a cold kernel cache compiles first: a minute or more
     while time.monotonic() < deadline:

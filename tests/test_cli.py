@@ -12,9 +12,11 @@ import pytest
 
 pytestmark = pytest.mark.slow  # each test starts a process that imports the service
 
+
 def app(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "app", *args], capture_output=True, text=True,
-                          timeout=120, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "app", *args], capture_output=True, text=True, timeout=120, env=env
+    )
 
 
 def test_the_help_lists_every_command() -> None:
@@ -38,27 +40,41 @@ def test_no_command_prints_the_help_and_fails() -> None:
     assert done.returncode == 2 and "commands:" in done.stderr and not done.stdout
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (("serve", "--port", "abc"),
-     "error: --port (EFSM_PORT): Input should be a valid integer, unable to parse string as an "
-     "integer, not 'abc'"),
-    (("serve", "--port", "70000"), "--port (EFSM_PORT): Input should be less than or equal"),
-    (("serve", "--data-dir", "{tmp}/a-file/models"),
-     "error: --data-dir (EFSM_DATA_DIR): cannot write to {tmp}/a-file/models: Not a directory"),
-    (("serve", "--config", "{tmp}/missing.json"), "--config (EFSM_CONFIG): Path does not point"),
-    (("serve", "--config", "{tmp}/a-file"), "--config (EFSM_CONFIG): {tmp}/a-file: not JSON"),
-    (("serve", "--config", "{tmp}/bad.json"),
-     "--config (EFSM_CONFIG): {tmp}/bad.json: clustering.epsilon: expected a number"),
-    (("serve", "--token", ""), "--token (EFSM_TOKEN): a token that is set must not be empty"),
-    (("serve", "--fsync", "sometimes"), "--fsync (EFSM_FSYNC): Input should be 'always'"),
-    (("serve", "--bogus", "1"), "error: unrecognized arguments: --bogus 1"),
-    (("serve", "--port"), "error: argument --port: expected one argument"),
-    (("serve-ray", "--shards", "0"), "--shards (EFSM_SHARDS): Input should be greater than"),
-    (("warm", "--now"), "error: warm takes no options, not '--now'"),
-    (("start",), "error: no command 'start': serve, serve-ray, warm"),
-])
-def test_a_command_line_error_is_one_line_naming_the_option(tmp_path: Path, args: tuple[str, ...],
-                                                            message: str) -> None:
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (
+            ("serve", "--port", "abc"),
+            "error: --port (EFSM_PORT): Input should be a valid integer, unable to parse "
+            "string as an integer, not 'abc'",
+        ),
+        (("serve", "--port", "70000"), "--port (EFSM_PORT): Input should be less than or equal"),
+        (
+            ("serve", "--data-dir", "{tmp}/a-file/models"),
+            "error: --data-dir (EFSM_DATA_DIR): cannot write to {tmp}/a-file/models: "
+            "Not a directory",
+        ),
+        (
+            ("serve", "--config", "{tmp}/missing.json"),
+            "--config (EFSM_CONFIG): Path does not point",
+        ),
+        (("serve", "--config", "{tmp}/a-file"), "--config (EFSM_CONFIG): {tmp}/a-file: not JSON"),
+        (
+            ("serve", "--config", "{tmp}/bad.json"),
+            "--config (EFSM_CONFIG): {tmp}/bad.json: clustering.epsilon: expected a number",
+        ),
+        (("serve", "--token", ""), "--token (EFSM_TOKEN): a token that is set must not be empty"),
+        (("serve", "--fsync", "sometimes"), "--fsync (EFSM_FSYNC): Input should be 'always'"),
+        (("serve", "--bogus", "1"), "error: unrecognized arguments: --bogus 1"),
+        (("serve", "--port"), "error: argument --port: expected one argument"),
+        (("serve-ray", "--shards", "0"), "--shards (EFSM_SHARDS): Input should be greater than"),
+        (("warm", "--now"), "error: warm takes no options, not '--now'"),
+        (("start",), "error: no command 'start': serve, serve-ray, warm"),
+    ],
+)
+def test_a_command_line_error_is_one_line_naming_the_option(
+    tmp_path: Path, args: tuple[str, ...], message: str
+) -> None:
     (tmp_path / "a-file").write_text("not json")
     (tmp_path / "bad.json").write_text('{"clustering": {"epsilon": "wide"}}')
     done = app(*(a.replace("{tmp}", str(tmp_path)) for a in args))

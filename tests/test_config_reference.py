@@ -16,8 +16,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _script() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("config_reference",
-                                                  ROOT / "scripts" / "config_reference.py")
+    spec = importlib.util.spec_from_file_location(
+        "config_reference", ROOT / "scripts" / "config_reference.py"
+    )
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -27,23 +28,36 @@ def _script() -> ModuleType:
 def test_the_committed_reference_is_what_the_script_writes() -> None:
     committed = (ROOT / "docs" / "configuration.md").read_text()
     assert committed == _script().render(), (
-        "docs/configuration.md is out of date: run .venv/bin/python scripts/config_reference.py")
+        "docs/configuration.md is out of date: run .venv/bin/python scripts/config_reference.py"
+    )
 
 
 def test_every_field_of_every_section_is_in_the_reference() -> None:
     text = _script().render()
-    for section in (config.ObservationSpec, config.Feature, config.ActionSpec,
-                    config.Criterion, config.Bound, config.ClusteringConfig,
-                    config.TransitionConfig, config.ReviserConfig, config.RiskConfig,
-                    config.LimitsConfig, config.ShieldConfig):
+    for section in (
+        config.ObservationSpec,
+        config.Feature,
+        config.ActionSpec,
+        config.Criterion,
+        config.Bound,
+        config.ClusteringConfig,
+        config.TransitionConfig,
+        config.ReviserConfig,
+        config.RiskConfig,
+        config.LimitsConfig,
+        config.ShieldConfig,
+    ):
         for f in dataclasses.fields(section):
             assert f"| `{f.name}` |" in text, f"{section.__name__}.{f.name}"
 
 
 def test_a_checked_range_appears_beside_its_field() -> None:
     """The range __post_init__ enforces is read from its _check call, not written by hand."""
-    rows = {line.split("|")[1].strip(): line for line in _script().render().splitlines()
-            if line.startswith("| `")}
+    rows = {
+        line.split("|")[1].strip(): line
+        for line in _script().render().splitlines()
+        if line.startswith("| `")
+    }
     assert "epsilon lies in (0, 10]" in rows["`epsilon`"]
     assert "reach_horizon lies in [0, 1024]" in rows["`reach_horizon`"]
     assert f"lies in [1, {config.MAX_TOP_K}]" in rows["`belief_top_k`"]

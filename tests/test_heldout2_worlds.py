@@ -16,16 +16,19 @@ from bench.worlds.harness import run
 
 DIRECTIONS = {
     "field": {"waterlogged": "decrease", "wilting": "increase"},
-    "aircraft": {"stall": "decrease", "negative_stall": "increase", "ground": "increase",
-                 "ceiling": "decrease"},
+    "aircraft": {
+        "stall": "decrease",
+        "negative_stall": "increase",
+        "ground": "increase",
+        "ceiling": "decrease",
+    },
     "reactor": {"runaway": "increase", "quench": "decrease"},
 }
 
 
 @pytest.mark.parametrize("bounded", [False, True])
 @pytest.mark.parametrize("name", NAMES)
-def test_a_world_fails_alone_in_the_ways_its_configuration_names(name: str,
-                                                                 bounded: bool) -> None:
+def test_a_world_fails_alone_in_the_ways_its_configuration_names(name: str, bounded: bool) -> None:
     chosen = world(name, bounded)
     alone = run(chosen, seed=7, episodes=40, warmup=0, config=None)
     assert 0.1 < alone["total"] / alone["episodes"] < 0.8  # fails often, not always
@@ -51,8 +54,12 @@ def test_an_unknown_world_is_refused_with_the_names_there_are() -> None:
         world("greenhouse")
 
 
-def first_event(env: Any, seed: int, policy: Callable[[int, np.ndarray], float],
-                setup: Callable[[Any], None] | None = None) -> tuple[str | None, int]:
+def first_event(
+    env: Any,
+    seed: int,
+    policy: Callable[[int, np.ndarray], float],
+    setup: Callable[[Any], None] | None = None,
+) -> tuple[str | None, int]:
     """The first failure of one episode under ``policy(step, observation)``, and its step."""
     observation, info = env.reset(seed=seed)
     assert info["event"] is None and info["task"] >= 0.0
@@ -61,7 +68,8 @@ def first_event(env: Any, seed: int, policy: Callable[[int, np.ndarray], float],
         observation = env._obs()
     for step in range(1, 301):
         observation, _, terminated, truncated, info = env.step(
-            np.array([policy(step, observation)]))
+            np.array([policy(step, observation)])
+        )
         assert not truncated and terminated == (info["event"] is not None)
         assert info["task"] >= 0.0
         if info["event"] is not None:
@@ -70,8 +78,7 @@ def first_event(env: Any, seed: int, policy: Callable[[int, np.ndarray], float],
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_the_field_waterlogs_a_day_after_too_much_water_and_wilts_on_too_little(
-        seed: int) -> None:
+def test_the_field_waterlogs_a_day_after_too_much_water_and_wilts_on_too_little(seed: int) -> None:
     event, step = first_event(field.Field(), seed, lambda _, obs: field.VALVE_MAX)
     assert event == "waterlogged" and step * field.DT >= 12.0  # [h]: the subsoil fills first
 
@@ -83,7 +90,8 @@ def test_the_field_waterlogs_a_day_after_too_much_water_and_wilts_on_too_little(
 
 @pytest.mark.parametrize("seed", range(4))
 def test_the_drone_pitches_away_when_unstable_and_pulling_up_from_the_ground_stalls_it(
-        seed: int) -> None:
+    seed: int,
+) -> None:
     def unstable(env: Any) -> None:
         env.stiffness = 25.0  # [1/s^2]: an aft centre of gravity
 
@@ -97,20 +105,24 @@ def test_the_drone_pitches_away_when_unstable_and_pulling_up_from_the_ground_sta
 
     held = first_event(aircraft.Aircraft(), seed, lambda _, obs: 0.0, sinking_low)
     assert held[0] == "ground"
-    pulled = first_event(aircraft.Aircraft(), seed, lambda _, obs: aircraft.ELEVATOR_MAX,
-                         sinking_low)
+    pulled = first_event(
+        aircraft.Aircraft(), seed, lambda _, obs: aircraft.ELEVATOR_MAX, sinking_low
+    )
     assert pulled[0] == "stall"  # the pull that leaves the ground behind stalls the wing
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_the_reactor_runs_away_above_its_operating_point_and_dies_down_below(
-        seed: int) -> None:
+def test_the_reactor_runs_away_above_its_operating_point_and_dies_down_below(seed: int) -> None:
     def at(temperature: float) -> Callable[[Any], None]:
         def setup(env: Any) -> None:
             env.temp = temperature
-            env.conc = (reactor.FEED_FLOW * env.feed_conc
-                        / (reactor.FEED_FLOW + reactor.VOLUME * reactor.rate(350.0)))
+            env.conc = (
+                reactor.FEED_FLOW
+                * env.feed_conc
+                / (reactor.FEED_FLOW + reactor.VOLUME * reactor.rate(350.0))
+            )
             env.jacket = reactor.JACKET_HELD
+
         return setup
 
     def held(step: int, observation: np.ndarray) -> float:

@@ -16,8 +16,7 @@ from bench.worlds.harness import run
 
 @pytest.mark.parametrize("bounded", [False, True])
 @pytest.mark.parametrize("name", NAMES)
-def test_a_world_fails_alone_in_every_way_its_configuration_names(name: str,
-                                                                  bounded: bool) -> None:
+def test_a_world_fails_alone_in_every_way_its_configuration_names(name: str, bounded: bool) -> None:
     chosen = world(name, bounded)
     alone = run(chosen, seed=7, episodes=60, warmup=0, config=None)
     assert 0.1 < alone["total"] / alone["episodes"] < 0.8  # fails often, not always
@@ -31,8 +30,12 @@ def test_an_unknown_world_is_refused_with_the_names_there_are() -> None:
         world("tank")
 
 
-def first_event(env: Any, seed: int, policy: Callable[[int, np.ndarray], float],
-                setup: Callable[[Any], None] | None = None) -> tuple[str | None, int]:
+def first_event(
+    env: Any,
+    seed: int,
+    policy: Callable[[int, np.ndarray], float],
+    setup: Callable[[Any], None] | None = None,
+) -> tuple[str | None, int]:
     """The first failure of one episode under ``policy(step, observation)``, and its step."""
     observation, _ = env.reset(seed=seed)
     if setup is not None:
@@ -47,15 +50,15 @@ def first_event(env: Any, seed: int, policy: Callable[[int, np.ndarray], float],
 
 @pytest.mark.parametrize("seed", range(6))
 def test_the_greenhouse_overheats_hours_after_too_much_heat_and_chills_on_too_little(
-        seed: int) -> None:
+    seed: int,
+) -> None:
     event, step = first_event(greenhouse.Greenhouse(), seed, lambda _, obs: 10.0)
     assert event == "overheat" and step * greenhouse.DT >= 0.9  # [h]: the loop is slow
     assert first_event(greenhouse.Greenhouse(), seed, lambda _, obs: 0.0)[0] == "chill"
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_steering_into_a_lean_rights_the_bicycle_but_carries_it_to_that_side(
-        seed: int) -> None:
+def test_steering_into_a_lean_rights_the_bicycle_but_carries_it_to_that_side(seed: int) -> None:
     def leaning_right(env: Any) -> None:
         env.lean, env.rate, env.heading, env.offset = 0.1, 0.0, 0.0, 0.0
 
@@ -73,6 +76,7 @@ def test_the_pile_runs_away_above_its_operating_point_and_dies_away_below(seed: 
         def setup(env: Any) -> None:
             env.power = env.precursors = power
             env.fuel = env.inlet + pile.RISE * power
+
         return setup
 
     def held(step: int, observation: np.ndarray) -> float:

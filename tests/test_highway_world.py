@@ -23,8 +23,9 @@ def highway_env() -> ModuleType:
     return module
 
 
-def drive(env: hw.SpeedTask, seed: int, action: float, steps: int = hw.MAX_STEPS
-          ) -> tuple[np.ndarray, bool, dict[str, object]]:
+def drive(
+    env: hw.SpeedTask, seed: int, action: float, steps: int = hw.MAX_STEPS
+) -> tuple[np.ndarray, bool, dict[str, object]]:
     """``action`` held from a reset with ``seed`` until the episode ends or ``steps`` pass:
     the last observation, whether it terminated, and the last info."""
     observation, info = env.reset(seed=seed)
@@ -51,9 +52,12 @@ def test_the_configuration_names_each_failure_and_its_direction() -> None:
         assert config.observation.low == (-1.0,) * 25 and config.observation.high == (1.0,) * 25
         assert (config.action.low, config.action.high) == (-1.0, 1.0)
     assert [(c.name, c.direction, c.bound) for c in hw.CONFIG.criteria] == [
-        ("collision", "decrease", None)]
+        ("collision", "decrease", None)
+    ]
     assert [(c.name, c.direction) for c in hw.CONFIG_TOO_SLOW.criteria] == [
-        ("collision", "decrease"), ("too_slow", "increase")]
+        ("collision", "decrease"),
+        ("too_slow", "increase"),
+    ]
     assert hw.WORLD.config is hw.CONFIG and hw.WORLD_TOO_SLOW.config is hw.CONFIG_TOO_SLOW
 
 
@@ -82,8 +86,7 @@ def test_a_crash_is_a_collision_and_ends_the_episode(highway_env: ModuleType) ->
     assert hw.collision(observation, {"crashed": False}) is None
 
 
-def test_too_slow_is_the_ego_below_20_m_s_and_ends_the_episode(highway_env: ModuleType
-                                                                 ) -> None:
+def test_too_slow_is_the_ego_below_20_m_s_and_ends_the_episode(highway_env: ModuleType) -> None:
     env = hw.make_env(hw.TOO_SLOW)
     observation, terminated, info = drive(env, 0, -1.0)  # full braking from 25 m/s
     assert terminated and info["too_slow"] and not info["crashed"]
@@ -94,7 +97,8 @@ def test_too_slow_is_the_ego_below_20_m_s_and_ends_the_episode(highway_env: Modu
 
 
 def test_the_controller_reads_the_car_ahead_as_highway_env_places_it(
-        highway_env: ModuleType) -> None:
+    highway_env: ModuleType,
+) -> None:
     env = hw.make_env()
     checked = 0
     for seed in range(4):
@@ -155,8 +159,7 @@ try:
 except ModuleNotFoundError as error:
     print(error)
 """
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=False)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     assert out.returncode == 0, out.stderr
     lines = out.stdout.splitlines()
     assert len(lines) == 2 and all("efsm-shield[highway]" in line for line in lines)

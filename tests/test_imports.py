@@ -42,8 +42,10 @@ def test_the_python_client_needs_no_torch(module: str) -> None:
     """What the 'client' extra installs (httpx, websocket-client, gymnasium) is enough for the
     clients, the WebSocket session, the wrappers and the simulator: torch, blocked here, is
     never imported, nor is anything of the 'experiment' or 'service' extras."""
-    code = (f"import sys; sys.modules['torch'] = None; import {module}; "
-            "print('\\n'.join(sorted(sys.modules)))")
+    code = (
+        f"import sys; sys.modules['torch'] = None; import {module}; "
+        "print('\\n'.join(sorted(sys.modules)))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     loaded = top(set(out.stdout.split()))

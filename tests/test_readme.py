@@ -21,15 +21,16 @@ README = Path(__file__).resolve().parent.parent / "README.md"
 def snippet(section: str) -> str:
     """The first Python block under the README heading ``section``."""
     text = README.read_text()
-    body = text[text.index(f"\n## {section}\n"):]
+    body = text[text.index(f"\n## {section}\n") :]
     found = re.search(r"```python\n(.*?)```", body, re.DOTALL)
     assert found is not None, section
     return found.group(1)
 
 
 def run(code: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=300, cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=cwd
+    )
 
 
 def test_the_core_snippet_runs(tmp_path: Path) -> None:

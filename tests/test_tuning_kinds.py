@@ -20,14 +20,20 @@ MODULES: dict[str, ModuleType] = {"dose": dose, "cartpole": cartpole, "chemostat
 
 # each failure, the direction of the action away from it, and the observation bound it has
 EXPECTED: dict[str, dict[str, tuple[str, str, float | None, float | None]]] = {
-    "dose": {"low": ("decrease", "x0", dose.LOW, None),
-             "high": ("increase", "x0", None, dose.HIGH)},
-    "cartpole": {"fall_right": ("increase", "x2", None, cartpole.FALL),
-                 "fall_left": ("decrease", "x2", -cartpole.FALL, None),
-                 "off_right": ("decrease", "x0", None, cartpole.EDGE),
-                 "off_left": ("increase", "x0", -cartpole.EDGE, None)},
-    "chemostat": {"bloom": ("increase", "x0", None, chemostat.BLOOM),
-                  "washout": ("decrease", "x0", chemostat.WASHOUT, None)},
+    "dose": {
+        "low": ("decrease", "x0", dose.LOW, None),
+        "high": ("increase", "x0", None, dose.HIGH),
+    },
+    "cartpole": {
+        "fall_right": ("increase", "x2", None, cartpole.FALL),
+        "fall_left": ("decrease", "x2", -cartpole.FALL, None),
+        "off_right": ("decrease", "x0", None, cartpole.EDGE),
+        "off_left": ("increase", "x0", -cartpole.EDGE, None),
+    },
+    "chemostat": {
+        "bloom": ("increase", "x0", None, chemostat.BLOOM),
+        "washout": ("decrease", "x0", chemostat.WASHOUT, None),
+    },
 }
 
 # the two kinds of failure each world has (a kind may have a side each)
@@ -38,8 +44,9 @@ KINDS: dict[str, tuple[set[str], set[str]]] = {
 }
 
 
-def episode(env: Any, seed: int, policy: Callable[[np.ndarray], float],
-            steps: int) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+def episode(
+    env: Any, seed: int, policy: Callable[[np.ndarray], float], steps: int
+) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
     """One episode of ``env`` from ``seed`` under ``policy``: the observations and infos, up
     to the first failure."""
     observation, info = env.reset(seed=seed)
@@ -53,8 +60,7 @@ def episode(env: Any, seed: int, policy: Callable[[np.ndarray], float],
     return observations, infos
 
 
-def first_event(module: ModuleType, seed: int,
-                policy: Callable[[np.ndarray], float]) -> str | None:
+def first_event(module: ModuleType, seed: int, policy: Callable[[np.ndarray], float]) -> str | None:
     """The failure that ends one episode of ``module``'s world under ``policy``."""
     world: World = module.WORLD
     _, infos = episode(world.make(seed), seed, policy, world.max_steps)
@@ -139,8 +145,7 @@ def test_the_extreme_doses_end_low_and_high(seed: int) -> None:
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_the_extreme_dilutions_end_in_a_bloom_and_a_washout(seed: int) -> None:
     assert first_event(chemostat, seed, lambda observation: 0.0) == "bloom"
-    assert first_event(chemostat, seed,
-                       lambda observation: chemostat.DILUTION_MAX) == "washout"
+    assert first_event(chemostat, seed, lambda observation: chemostat.DILUTION_MAX) == "washout"
 
 
 def balancing_towards(target: float) -> Callable[[np.ndarray], float]:
@@ -157,8 +162,7 @@ def balancing_towards(target: float) -> Callable[[np.ndarray], float]:
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_a_cart_pushed_one_way_drops_the_pole_the_other_and_one_saved_runs_off(
-        seed: int) -> None:
+def test_a_cart_pushed_one_way_drops_the_pole_the_other_and_one_saved_runs_off(seed: int) -> None:
     # a constant push right leaves the pole behind, to the left, and a push left to the right
     assert first_event(cartpole, seed, lambda observation: cartpole.FORCE_MAX) == "fall_left"
     assert first_event(cartpole, seed, lambda observation: -cartpole.FORCE_MAX) == "fall_right"

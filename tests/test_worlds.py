@@ -81,7 +81,8 @@ def test_the_tank_fails_both_ways_alone_and_the_shield_learns_from_it() -> None:
 
 @pytest.mark.parametrize("seed", [0, 3])
 def test_the_lander_always_lands_hard_alone_and_the_shield_learns_to_fire_earlier(
-        seed: int) -> None:
+    seed: int,
+) -> None:
     # its failure builds up over more steps than the horizon, from a controller that fires
     # only too late: the shield must try firing harder where the controller never did (seed
     # 0, with 3-4 broad states, needs the reach: the local model alone reads every thrust alike)
@@ -116,8 +117,9 @@ def test_compare_names_the_worst_seed_and_the_seeds_a_shield_harmed() -> None:
     result = compare(world, [7, 8], episodes=8, warmup=2)
     ratios = [r["ratio"] for r in result["runs"]]
     assert result["worst_seed_ratio"] == max(r for r in ratios if r is not None)
-    assert result["harmed_seeds"] == [r["seed"] for r in result["runs"]
-                                      if r["shielded"]["total"] > r["alone"]["total"]]
+    assert result["harmed_seeds"] == [
+        r["seed"] for r in result["runs"] if r["shielded"]["total"] > r["alone"]["total"]
+    ]
     assert "worst seed" in summary_line(result) and "revised" in summary_line(result)
 
 

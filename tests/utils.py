@@ -53,8 +53,12 @@ CLIFF_CRITERIA = (Criterion("collision", "decrease"), Criterion("large_distance"
 def cliff_config(**reviser: Any) -> ShieldConfig:
     """A one-dimensional world for the behavioural tests (see :func:`run_cliff`), with the
     paper's reviser unless ``method`` says otherwise."""
-    options: dict[str, Any] = {"method": "paper", "activate_after_episodes": 10, "noise_k": 1.0,
-                               "noise": "std"}
+    options: dict[str, Any] = {
+        "method": "paper",
+        "activate_after_episodes": 10,
+        "noise_k": 1.0,
+        "noise": "std",
+    }
     options.update(reviser)
     return ShieldConfig(
         observation=CLIFF_OBSERVATION,
@@ -97,8 +101,10 @@ def run_cliff(
 def rewrite_npz_member(npz: bytes, member: str, change: Callable[[bytes], bytes]) -> bytes:
     """An ``.npz`` snapshot with the bytes of one member replaced by ``change`` of them."""
     buffer = io.BytesIO()
-    with zipfile.ZipFile(io.BytesIO(npz)) as source, \
-            zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as target:
+    with (
+        zipfile.ZipFile(io.BytesIO(npz)) as source,
+        zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as target,
+    ):
         for info in source.infolist():
             data = source.read(info)
             target.writestr(info.filename, change(data) if info.filename == member else data)

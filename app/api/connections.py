@@ -61,11 +61,15 @@ class LimitedHttp(HttpToolsProtocol):
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
         super().connection_made(transport)
         if len(self.connections) > self.limits.max_connections:
-            log.debug("refused a connection from %s: %d open", self.client,
-                     len(self.connections) - 1)
-            self._answer(HTTPStatus.SERVICE_UNAVAILABLE, "overloaded",
-                         f"the server has its most connections open "
-                         f"({self.limits.max_connections}); try again shortly")
+            log.debug(
+                "refused a connection from %s: %d open", self.client, len(self.connections) - 1
+            )
+            self._answer(
+                HTTPStatus.SERVICE_UNAVAILABLE,
+                "overloaded",
+                f"the server has its most connections open "
+                f"({self.limits.max_connections}); try again shortly",
+            )
             return
         self._header_bytes = 0
         self._arm(self.limits.header_timeout, self._headers_late)
@@ -78,8 +82,11 @@ class LimitedHttp(HttpToolsProtocol):
         if in_headers and self._header_bytes is not None:  # the whole chunk: header bytes
             self._header_bytes += len(data)
             if self._header_bytes > MAX_HEADER_BYTES:
-                self._answer(HTTPStatus.REQUEST_HEADER_FIELDS_TOO_LARGE, "headers_too_large",
-                             f"the request line and headers take over {MAX_HEADER_BYTES} bytes")
+                self._answer(
+                    HTTPStatus.REQUEST_HEADER_FIELDS_TOO_LARGE,
+                    "headers_too_large",
+                    f"the request line and headers take over {MAX_HEADER_BYTES} bytes",
+                )
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._disarm()
@@ -111,18 +118,27 @@ class LimitedHttp(HttpToolsProtocol):
 
     def _headers_late(self) -> None:
         self._timer = None
-        log.debug("closed a connection from %s: no complete headers within %s s", self.client,
-                 self.limits.header_timeout)
-        self._answer(HTTPStatus.REQUEST_TIMEOUT, "request_timeout",
-                     f"the request line and headers took over {self.limits.header_timeout} s")
+        log.debug(
+            "closed a connection from %s: no complete headers within %s s",
+            self.client,
+            self.limits.header_timeout,
+        )
+        self._answer(
+            HTTPStatus.REQUEST_TIMEOUT,
+            "request_timeout",
+            f"the request line and headers took over {self.limits.header_timeout} s",
+        )
 
     def _body_late(self) -> None:
         self._timer = None
         if self.flow.read_paused:  # the server is behind, not the client: wait on
             self._arm(self.limits.body_timeout, self._body_late)
             return
-        log.debug("closed a connection from %s: its body paused over %s s", self.client,
-                 self.limits.body_timeout)
+        log.debug(
+            "closed a connection from %s: its body paused over %s s",
+            self.client,
+            self.limits.body_timeout,
+        )
         cycle = self.cycle
         if cycle.response_started:
             self.transport.close()
@@ -130,8 +146,11 @@ class LimitedHttp(HttpToolsProtocol):
         # the request's task reads a disconnect and its answer goes nowhere
         cycle.disconnected = True
         cycle.message_event.set()
-        self._answer(HTTPStatus.REQUEST_TIMEOUT, "request_timeout",
-                     f"the request body paused over {self.limits.body_timeout} s")
+        self._answer(
+            HTTPStatus.REQUEST_TIMEOUT,
+            "request_timeout",
+            f"the request body paused over {self.limits.body_timeout} s",
+        )
 
     def _answer(self, status: HTTPStatus, code: str, message: str) -> None:
         """Write a whole response with the service's error body and end the connection: the
@@ -144,8 +163,11 @@ class LimitedHttp(HttpToolsProtocol):
         body = json.dumps(error_body(code, message)).encode()
         head = [f"HTTP/1.1 {status.value} {status.phrase}".encode()]
         head += [name + b": " + value for name, value in self.server_state.default_headers]
-        head += [b"content-type: application/json", b"content-length: %d" % len(body),
-                 b"connection: close"]
+        head += [
+            b"content-type: application/json",
+            b"content-length: %d" % len(body),
+            b"connection: close",
+        ]
         self.transport.write(b"\r\n".join(head) + b"\r\n\r\n" + body)
         self.transport.write_eof()
         self._arm(LINGER, self.transport.close)
@@ -169,8 +191,13 @@ class LingeringWebSocket(WebSocketsSansIOProtocol):
         if self.close_sent:  # the rest of the refused frame: dropped by the parser
             return
         assert self.conn.close_sent is not None
-        self.queue.put_nowait({"type": "websocket.disconnect", "code": self.conn.close_sent.code,
-                               "reason": self.conn.close_sent.reason})
+        self.queue.put_nowait(
+            {
+                "type": "websocket.disconnect",
+                "code": self.conn.close_sent.code,
+                "reason": self.conn.close_sent.reason,
+            }
+        )
         self.transport.write(b"".join(self.conn.data_to_send()))
         self.close_sent = True
         self.close_timer = self.loop.call_later(self.close_timeout, self.transport.close)

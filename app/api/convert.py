@@ -25,5 +25,14 @@ def _plain(value: Any) -> dict[str, Any]:
 
 
 def to_step(body: ReviseRequest) -> Step:
-    return Step(body.observation, body.action, body.stream, body.event, body.done,
-                body.applied_action, body.learn, body.shadow, body.idempotency_key)
+    return Step(
+        body.observation,
+        body.action,
+        body.stream,
+        body.event,
+        body.done,
+        body.applied_action,
+        body.learn,
+        body.shadow,
+        body.idempotency_key,
+    )

@@ -70,9 +70,16 @@ class KnownQueryRoute(APIRoute):
             if request.scope["query_string"]:
                 for name, value in request.query_params.multi_items():
                     if name not in taken:
-                        raise RequestValidationError([{
-                            "type": "extra_forbidden", "loc": ("query", name), "input": value,
-                            "msg": f"unknown query parameter; this route {takes}"}])
+                        raise RequestValidationError(
+                            [
+                                {
+                                    "type": "extra_forbidden",
+                                    "loc": ("query", name),
+                                    "input": value,
+                                    "msg": f"unknown query parameter; this route {takes}",
+                                }
+                            ]
+                        )
             return await handler(request)
 
         return checked

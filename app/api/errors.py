@@ -81,8 +81,11 @@ def status_of(error: ShieldError) -> int:
 def shield_error(_: Request, error: Exception) -> JSONResponse:
     assert isinstance(error, ShieldError)
     headers = {"WWW-Authenticate": "Bearer"} if isinstance(error, Unauthorized) else None
-    return JSONResponse(error_body(error.code, error.message, error.field),
-                        status_code=status_of(error), headers=headers)
+    return JSONResponse(
+        error_body(error.code, error.message, error.field),
+        status_code=status_of(error),
+        headers=headers,
+    )
 
 
 def validation_error(request: Request, error: Exception) -> JSONResponse:
@@ -119,8 +122,11 @@ def _first_error(errors: Sequence[Any]) -> dict[str, Any]:
     if first.get("type") == "json_invalid":  # loc holds a character position, not a field
         return error_body("invalid_json", first.get("msg", "invalid JSON"))
     where, *loc = [str(p) for p in first.get("loc", ("body",))]
-    return error_body(_code_of(first.get("type", ""), where),
-                      first.get("msg", "invalid request"), ".".join(loc) or None)
+    return error_body(
+        _code_of(first.get("type", ""), where),
+        first.get("msg", "invalid request"),
+        ".".join(loc) or None,
+    )
 
 
 def _code_of(kind: str, where: str) -> str:
@@ -134,11 +140,13 @@ def _code_of(kind: str, where: str) -> str:
 def http_error(_: Request, error: Exception) -> JSONResponse:
     assert isinstance(error, HTTPException)
     if error.status_code == 400:  # FastAPI could not read the body (UTF-8, nesting): not JSON
-        return JSONResponse(error_body("invalid_json", f"the body is not JSON: {error.detail}"),
-                            status_code=422)
+        return JSONResponse(
+            error_body("invalid_json", f"the body is not JSON: {error.detail}"), status_code=422
+        )
     code = {404: "not_found", 405: "method_not_allowed"}.get(error.status_code, "http_error")
-    return JSONResponse(error_body(code, str(error.detail)), status_code=error.status_code,
-                        headers=error.headers)
+    return JSONResponse(
+        error_body(code, str(error.detail)), status_code=error.status_code, headers=error.headers
+    )
 
 
 def internal_error(request: Request, error: Exception) -> JSONResponse:

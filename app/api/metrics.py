@@ -26,7 +26,8 @@ class ModelCollector(Collector):
             "efsm_interventions", "Revised actions", labels=["model", "criterion"]
         )
         decisions = CounterMetricFamily(
-            "efsm_decisions", "Decisions served by this process, by reason",
+            "efsm_decisions",
+            "Decisions served by this process, by reason",
             labels=["model", "reason"],
         )
         for name in self.models.names():
@@ -50,9 +51,17 @@ class AppMetrics:
 
     def __init__(self, models: ModelRegistry) -> None:
         self.registry = CollectorRegistry()
-        self.requests = Counter("efsm_http_requests", "HTTP requests",
-                                ["route", "method", "status"], registry=self.registry)
-        self.latency = Histogram("efsm_http_request_seconds", "HTTP request latency",
-                                 ["route"], registry=self.registry,
-                                 buckets=(1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 0.1, 1))
+        self.requests = Counter(
+            "efsm_http_requests",
+            "HTTP requests",
+            ["route", "method", "status"],
+            registry=self.registry,
+        )
+        self.latency = Histogram(
+            "efsm_http_request_seconds",
+            "HTTP request latency",
+            ["route"],
+            registry=self.registry,
+            buckets=(1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 0.1, 1),
+        )
         self.registry.register(ModelCollector(models))

@@ -62,8 +62,13 @@ class BodyLimit:
 
     async def _refuse(self, send: Send, limit: int) -> None:
         body = json.dumps(error_body("too_large", f"request body over {limit} bytes"))
-        await send({"type": "http.response.start", "status": 413,
-                    "headers": [(b"content-type", b"application/json")]})
+        await send(
+            {
+                "type": "http.response.start",
+                "status": 413,
+                "headers": [(b"content-type", b"application/json")],
+            }
+        )
         await send({"type": "http.response.body", "body": body.encode()})
 
 

@@ -34,10 +34,17 @@ class Reply:
 
 def _scope(request: Request) -> dict[str, Any]:
     return {
-        "type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1",
-        "method": request.method, "scheme": "http", "path": request.path,
-        "raw_path": request.path.encode(), "query_string": request.query, "root_path": "",
-        "headers": list(request.headers), "client": ("127.0.0.1", 0),
+        "type": "http",
+        "asgi": {"version": "3.0"},
+        "http_version": "1.1",
+        "method": request.method,
+        "scheme": "http",
+        "path": request.path,
+        "raw_path": request.path.encode(),
+        "query_string": request.query,
+        "root_path": "",
+        "headers": list(request.headers),
+        "client": ("127.0.0.1", 0),
         "server": ("127.0.0.1", 80),
     }
 

@@ -100,8 +100,7 @@ def _labelled(sample: str, shard: int) -> str:
     return f'{name}{{shard="{shard}"{"" if rest.startswith("}") else ","}{rest}'
 
 
-def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: ShardStream
-                ) -> FastAPI:
+def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: ShardStream) -> FastAPI:
     """An ingress over ``n_shards`` shards reached through ``call`` and ``stream``."""
     learned = Moves()  # where this ingress saw models go; the shards hold the truth
     limit = max(settings.max_body_bytes, settings.max_snapshot_bytes)
@@ -122,8 +121,10 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
             return await call(shard, method, *args)
         except Exception as error:  # a shard that died or cannot be reached
             log.error("shard %d did not answer %s: %r", shard, method, error)
-            raise ShardUnavailable(f"shard {shard} did not answer ({type(error).__name__}); "
-                                   "it restarts from its files: send again") from error
+            raise ShardUnavailable(
+                f"shard {shard} did not answer ({type(error).__name__}); "
+                "it restarts from its files: send again"
+            ) from error
 
     async def routed(names: list[str], method: str, *args: Any) -> Any:
         """``method`` on the shard of ``names``, following the moves the shards report."""
@@ -132,7 +133,9 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
             if len(owners) > 1:
                 raise SeveralShards(
                     "a batch across models must name models of one shard (see GET /shards; "
-                    "POST /shards/move puts models together)", field="steps")
+                    "POST /shards/move puts models together)",
+                    field="steps",
+                )
             result = await on(owners.pop() if owners else 0, method, *args)
             if not isinstance(result, Moved):
                 return result
@@ -147,8 +150,9 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
                 head = await anext(parts)
             except Exception as error:  # a shard that died or cannot be reached
                 log.error("shard %d did not answer a stream: %r", owner(name), error)
-                raise ShardUnavailable(f"shard {owner(name)} did not answer "
-                                       f"({type(error).__name__}): send again") from error
+                raise ShardUnavailable(
+                    f"shard {owner(name)} did not answer ({type(error).__name__}): send again"
+                ) from error
             if isinstance(head, Moved):
                 learn(head)
                 continue
@@ -171,8 +175,7 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
         log.info("ingress over %d shards", n_shards)
         yield
 
-    api = FastAPI(title="e-FSM safety shield (sharded)", version=app.__version__,
-                  lifespan=lifespan)
+    api = FastAPI(title="e-FSM safety shield (sharded)", version=app.__version__, lifespan=lifespan)
     api.state.settings = settings
     errors.install(api)
 
@@ -190,9 +193,11 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
         except ShardUnavailable as error:
             return JSONResponse({"status": "loading", "reason": error.message}, 503)
         ready = all(info["ready"] for info in infos)
-        body = {"status": "ready" if ready else "loading",
-                "models": sum(len(info["models"]) for info in infos),
-                "quarantined": {k: v for info in infos for k, v in info["quarantined"].items()}}
+        body = {
+            "status": "ready" if ready else "loading",
+            "models": sum(len(info["models"]) for info in infos),
+            "quarantined": {k: v for info in infos for k, v in info["quarantined"].items()},
+        }
         return JSONResponse(body, status_code=200 if ready else 503)
 
     @api.get("/shards")
@@ -228,8 +233,10 @@ def ingress_app(settings: Settings, n_shards: int, call: ShardCall, stream: Shar
         replies, refused = await everywhere(request)
         if refused is not None:
             return _response(refused)
-        return Response(merge_metrics([r.body.decode() for r in replies]),
-                        media_type="text/plain; version=0.0.4; charset=utf-8")
+        return Response(
+            merge_metrics([r.body.decode() for r in replies]),
+            media_type="text/plain; version=0.0.4; charset=utf-8",
+        )
 
     @api.websocket("/models/{name}/ws")
     async def model_stream(websocket: WebSocket, name: NamePath) -> None:
@@ -290,8 +297,13 @@ async def _read(request: Request, limit: int) -> bytes:
 
 
 def _copy(request: Request, body: bytes) -> asgi.Request:
-    return asgi.Request(request.method, request.url.path, request.scope["query_string"],
-                        tuple(request.scope["headers"]), body)
+    return asgi.Request(
+        request.method,
+        request.url.path,
+        request.scope["query_string"],
+        tuple(request.scope["headers"]),
+        body,
+    )
 
 
 def _response(reply: asgi.Reply) -> Response:

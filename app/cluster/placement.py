@@ -32,8 +32,8 @@ class Moves:
             except ValueError as error:
                 raise PlacementError(f"{path} is unreadable: {error}") from error
             if not isinstance(where, dict) or not all(
-                    isinstance(k, str) and isinstance(v, int) and v >= 0
-                    for k, v in where.items()):
+                isinstance(k, str) and isinstance(v, int) and v >= 0 for k, v in where.items()
+            ):
                 raise PlacementError(f"{path} must map model names to shard indices")
             self.where = where
 
@@ -66,8 +66,10 @@ class Moves:
 
 def hashed_owner(name: str, n_shards: int) -> int:
     """The home shard of ``name``: the highest weight ``blake2b(shard, name)``."""
+
     def weight(shard: int) -> bytes:
         return hashlib.blake2b(f"{shard}\0{name}".encode(), digest_size=8).digest()
+
     return max(range(n_shards), key=weight)
 
 
@@ -87,7 +89,8 @@ def check_shards(data_dir: Path | None, n_shards: int) -> None:
         if written != n_shards:
             raise PlacementError(
                 f"{data_dir} holds a cluster of {written} shards, not {n_shards}: its models "
-                "stay on the shards that hold their files; start it with the same number")
+                "stay on the shards that hold their files; start it with the same number"
+            )
         return
     data_dir.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({"shards": n_shards}))

@@ -58,25 +58,30 @@ class Ingress:
         return await getattr(self._shards[shard], method).remote(*args)
 
     def _stream(self, shard: int, method: str, *args: Any) -> AsyncIterator[Any]:
-        parts: AsyncIterator[Any] = getattr(self._shards[shard].options(stream=True),
-                                            method).remote(*args)
+        parts: AsyncIterator[Any] = getattr(
+            self._shards[shard].options(stream=True), method
+        ).remote(*args)
         return parts
 
     def __serve_build_asgi_app__(self) -> Any:
         return self._asgi
 
 
-SHARD = serve.deployment(ray_actor_options={"num_cpus": 0}, max_ongoing_requests=CONCURRENCY,
-                         health_check_period_s=1, health_check_timeout_s=30)(Shard)
-INGRESS = serve.deployment(ray_actor_options={"num_cpus": 0},
-                           max_ongoing_requests=CONCURRENCY)(serve.ingress()(Ingress))
+SHARD = serve.deployment(
+    ray_actor_options={"num_cpus": 0},
+    max_ongoing_requests=CONCURRENCY,
+    health_check_period_s=1,
+    health_check_timeout_s=30,
+)(Shard)
+INGRESS = serve.deployment(ray_actor_options={"num_cpus": 0}, max_ongoing_requests=CONCURRENCY)(
+    serve.ingress()(Ingress)
+)
 
 
 def application(settings: ClusterSettings) -> Any:
     """The Serve application: ``settings.ingresses`` ingresses over ``settings.shards``
     shards."""
-    shards = [SHARD.options(name=f"shard-{i}").bind(settings, i)
-              for i in range(settings.shards)]
+    shards = [SHARD.options(name=f"shard-{i}").bind(settings, i) for i in range(settings.shards)]
     return INGRESS.options(num_replicas=settings.ingresses).bind(settings, *shards)
 
 
@@ -86,8 +91,11 @@ def run(settings: ClusterSettings) -> None:
     (:class:`~app.cluster.placement.PlacementError`)."""
     check_shards(settings.data_dir, settings.shards)  # a wrong shard count fails here
     if settings.ray_address is None:
-        ray.init(include_dashboard=False, num_cpus=settings.ray_cpus,
-                 object_store_memory=settings.ray_object_store_mb * 2**20)
+        ray.init(
+            include_dashboard=False,
+            num_cpus=settings.ray_cpus,
+            object_store_memory=settings.ray_object_store_mb * 2**20,
+        )
     else:
         ray.init(address=settings.ray_address)
     stop = threading.Event()
@@ -96,8 +104,13 @@ def run(settings: ClusterSettings) -> None:
     try:
         serve.start(http_options={"host": settings.host, "port": settings.port})
         serve.run(application(settings), name=APP_NAME, route_prefix="/")
-        log.info("serving on http://%s:%d: %d shards, %d ingresses", settings.host,
-                 settings.port, settings.shards, settings.ingresses)
+        log.info(
+            "serving on http://%s:%d: %d shards, %d ingresses",
+            settings.host,
+            settings.port,
+            settings.shards,
+            settings.ingresses,
+        )
         stop.wait()
     finally:
         log.info("stopping: the shards snapshot their models")

@@ -25,8 +25,11 @@ def named(method: str, path: str, body: bytes) -> list[str]:
         steps = document.get("steps")
         if not isinstance(steps, list):
             return []
-        return list(dict.fromkeys(s["model"] for s in steps
-                                  if isinstance(s, dict) and isinstance(s.get("model"), str)))
+        return list(
+            dict.fromkeys(
+                s["model"] for s in steps if isinstance(s, dict) and isinstance(s.get("model"), str)
+            )
+        )
     parts = path.strip("/").split("/")
     if parts[0] == "models" and len(parts) >= 2 and parts[1]:
         return [parts[1]]

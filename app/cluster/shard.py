@@ -105,11 +105,16 @@ class ShardServer:
         self.moved = Moves(None if own.data_dir is None else own.data_dir / "moved.json")
         self.registry.open()
         for name in set(self.moved.where) & set(self.registry.names()):
-            log.warning("shard %d: %r was handed to shard %d before a stop; deleting the copy "
-                        "left here", index, name, self.moved.where[name])
+            log.warning(
+                "shard %d: %r was handed to shard %d before a stop; deleting the copy left here",
+                index,
+                name,
+                self.moved.where[name],
+            )
             self.registry.delete(name)  # a move that stopped between its last two steps
-        log.info("shard %d (pid %d): %d models loaded", index, os.getpid(),
-                 len(self.registry.names()))
+        log.info(
+            "shard %d (pid %d): %d models loaded", index, os.getpid(), len(self.registry.names())
+        )
 
     def _away(self, names: Iterable[str]) -> Moved | None:
         for name in names:
@@ -195,9 +200,15 @@ class ShardServer:
 
     async def info(self) -> dict[str, Any]:
         """Where this shard runs, what it holds and what it gave away."""
-        return {"shard": self.index, "host": socket.gethostname(), "pid": os.getpid(),
-                "ready": self.registry.ready, "models": self.registry.names(),
-                "moved_away": dict(self.moved.where), "quarantined": self.registry.quarantined}
+        return {
+            "shard": self.index,
+            "host": socket.gethostname(),
+            "pid": os.getpid(),
+            "ready": self.registry.ready,
+            "models": self.registry.names(),
+            "moved_away": dict(self.moved.where),
+            "quarantined": self.registry.quarantined,
+        }
 
     def close(self) -> None:
         """Snapshot every model and close its files."""

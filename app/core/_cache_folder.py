@@ -34,8 +34,11 @@ def private_folder(folder: Path) -> Path:
     try:
         folder.mkdir(mode=0o700, exist_ok=True)
         info = folder.lstat()
-        if stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid() and not (
-                info.st_mode & (stat.S_IWGRP | stat.S_IWOTH)):
+        if (
+            stat.S_ISDIR(info.st_mode)
+            and info.st_uid == os.getuid()
+            and not (info.st_mode & (stat.S_IWGRP | stat.S_IWOTH))
+        ):
             return folder
     except OSError:
         pass
@@ -53,8 +56,11 @@ def ensure() -> Path | None:
     folder = private_folder(Path(tempfile.gettempdir()) / f"efsm-numba-{os.getuid()}")
     # numba reads it as each kernel is defined
     config.CACHE_DIR = str(folder)  # type: ignore[attr-defined]
-    log.warning("numba has no folder it can write to cache the compiled core in (set "
-                "NUMBA_CACHE_DIR to one): it goes to %s", folder)
+    log.warning(
+        "numba has no folder it can write to cache the compiled core in (set "
+        "NUMBA_CACHE_DIR to one): it goes to %s",
+        folder,
+    )
     return folder
 
 

@@ -121,8 +121,15 @@ def log(x: FloatArray) -> FloatArray:
 
 
 @njit(cache=True)
-def weighted_rls(weights: FloatArray, cov: FloatArray, index: IntArray, prob: FloatArray,
-                 phi: FloatArray, targets: FloatArray, min_weight: float) -> None:
+def weighted_rls(
+    weights: FloatArray,
+    cov: FloatArray,
+    index: IntArray,
+    prob: FloatArray,
+    phi: FloatArray,
+    targets: FloatArray,
+    min_weight: float,
+) -> None:
     """One sample ``(phi, targets)`` into the linear models ``weights[i]`` (outputs x
     features) of the states ``index``: weighted recursive least squares, each with weight
     ``prob`` (the state's membership), every output sharing the state's covariance

@@ -48,27 +48,34 @@ def real(value: Any, field: str, low: float = -MAX_STORED, high: float = MAX_STO
     return number
 
 
-def floats(value: Any, field: str, shape: Sequence[int] | None = None,
-           low: float = -MAX_STORED, high: float = MAX_STORED) -> npt.NDArray[np.float64]:
+def floats(
+    value: Any,
+    field: str,
+    shape: Sequence[int] | None = None,
+    low: float = -MAX_STORED,
+    high: float = MAX_STORED,
+) -> npt.NDArray[np.float64]:
     """A float64 array of ``shape`` (any, if None) with every entry finite in ``[low, high]``."""
     array = _numeric(value, field, np.float64, shape)
-    if array.size and not (np.isfinite(array).all() and array.min() >= low
-                           and array.max() <= high):
-        raise InvalidSnapshot(f"entries must be finite and lie in [{low:g}, {high:g}]",
-                              field=field)
+    if array.size and not (np.isfinite(array).all() and array.min() >= low and array.max() <= high):
+        raise InvalidSnapshot(f"entries must be finite and lie in [{low:g}, {high:g}]", field=field)
     return array
 
 
 def distribution(prob: npt.NDArray[np.float64], field: str) -> None:
     """Refuse probabilities (each in [0, 1] already) whose sum is not 1."""
     if abs(float(prob.sum()) - 1.0) > SUM_TOLERANCE:
-        raise InvalidSnapshot(f"probabilities summing to {float(prob.sum()):g}, not 1",
-                              field=field)
+        raise InvalidSnapshot(f"probabilities summing to {float(prob.sum()):g}, not 1", field=field)
 
 
-def ints(value: Any, field: str, shape: Sequence[int] | None = None, low: int = 0,
-         high: int | None = None, dtype: type[np.integer[Any]] = np.int64
-         ) -> npt.NDArray[Any]:
+def ints(
+    value: Any,
+    field: str,
+    shape: Sequence[int] | None = None,
+    low: int = 0,
+    high: int | None = None,
+    dtype: type[np.integer[Any]] = np.int64,
+) -> npt.NDArray[Any]:
     """An integer array of ``shape`` with every entry in ``[low, high]``."""
     array = _numeric(value, field, dtype, shape)
     if array.size and (array.min() < low or (high is not None and array.max() > high)):
@@ -91,8 +98,9 @@ def _numeric(value: Any, field: str, dtype: Any, shape: Sequence[int] | None) ->
             raise InvalidSnapshot("expected an array of numbers", field=field)
     want = np.dtype(dtype)
     if want.kind in "iu" and source.size:
-        if source.dtype.kind == "f" and not (np.isfinite(source).all()
-                                             and (source == np.round(source)).all()):
+        if source.dtype.kind == "f" and not (
+            np.isfinite(source).all() and (source == np.round(source)).all()
+        ):
             raise InvalidSnapshot("expected integers", field=field)
         limits = np.iinfo(want)
         if source.min() < limits.min or source.max() > limits.max:
@@ -100,7 +108,8 @@ def _numeric(value: Any, field: str, dtype: Any, shape: Sequence[int] | None) ->
     array = source.astype(want)
     if shape is not None and array.shape != tuple(shape):
         if array.size != int(np.prod(shape)):
-            raise InvalidSnapshot(f"expected shape {list(shape)}, got {list(array.shape)}",
-                                  field=field)
+            raise InvalidSnapshot(
+                f"expected shape {list(shape)}, got {list(array.shape)}", field=field
+            )
         array = array.reshape(shape)
     return array

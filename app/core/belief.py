@@ -79,8 +79,9 @@ def recognise(sq_distances: FloatArray, variances: FloatArray, k: int) -> Belief
 
 
 @njit(cache=True, error_model="numpy")  # variances are positive: no check, so it vectorises
-def _recognise(sq_distances: FloatArray, variances: FloatArray, k: int, index: IndexArray,
-               prob: FloatArray) -> int:
+def _recognise(
+    sq_distances: FloatArray, variances: FloatArray, k: int, index: IndexArray, prob: FloatArray
+) -> int:
     """Fill ``index`` (ascending) and ``prob`` with the belief; return its size."""
     n = sq_distances.shape[0]
     logits = np.empty(n)

@@ -66,8 +66,10 @@ class EvolvingClusterer:
         self.counts = np.zeros(3, dtype=np.int64)
         self.sums = np.zeros(dim + 1)
         self.params = np.array([config.epsilon, config.rho, config.min_variance])
-        self.modes = np.array([config.creation_rule == "ets_plus", _SPREADS[config.spread],
-                               max_states], dtype=np.int64)
+        self.modes = np.array(
+            [config.creation_rule == "ets_plus", _SPREADS[config.spread], max_states],
+            dtype=np.int64,
+        )
         self.centres_t = np.zeros((dim, 0))
         self.stats = np.zeros((5, 0))
         self.support_counts = np.zeros(0, dtype=np.int64)
@@ -137,13 +139,29 @@ class EvolvingClusterer:
         kind, at, m = learn_and_recognise(z, *self.arrays(), k, index, prob)
         return StateUpdate(_KINDS[kind], at), Belief(index[:m], prob[:m])
 
-    def arrays(self) -> tuple[FloatArray, FloatArray, npt.NDArray[np.int64], FloatArray,
-                              npt.NDArray[np.int64], FloatArray, npt.NDArray[np.int64]]:
+    def arrays(
+        self,
+    ) -> tuple[
+        FloatArray,
+        FloatArray,
+        npt.NDArray[np.int64],
+        FloatArray,
+        npt.NDArray[np.int64],
+        FloatArray,
+        npt.NDArray[np.int64],
+    ]:
         """What a compiled step clusters with (:func:`learn_and_recognise`'s arrays, in
         order): the same tuple until :meth:`make_room` replaces them."""
         if self._arrays is None:
-            self._arrays = (self.centres_t, self.stats, self.support_counts, self.sums,
-                            self.counts, self.params, self.modes)
+            self._arrays = (
+                self.centres_t,
+                self.stats,
+                self.support_counts,
+                self.sums,
+                self.counts,
+                self.params,
+                self.modes,
+            )
         return self._arrays
 
     def make_room(self) -> None:
@@ -182,41 +200,52 @@ class EvolvingClusterer:
         self.counts[SAMPLES] = stored.integer(data["k"], "clustering.k")
         self.sums[:dim] = stored.floats(data["beta"], "clustering.beta", (dim,))
         self.sums[dim] = stored.real(data["sigma"], "clustering.sigma", low=0.0)
-        self.counts[CAPACITY_HITS] = stored.integer(data["capacity_hits"],
-                                                    "clustering.capacity_hits")
+        self.counts[CAPACITY_HITS] = stored.integer(
+            data["capacity_hits"], "clustering.capacity_hits"
+        )
         centres = stored.floats(data["centres"], "clustering.centres")
         n = centres.size // dim if dim else 0
         if centres.shape not in ((n, dim), (n * dim,)) or n > max_states:
-            raise InvalidSnapshot(f"expected at most {max_states} centres of {dim} numbers",
-                                  field="clustering.centres")
+            raise InvalidSnapshot(
+                f"expected at most {max_states} centres of {dim} numbers",
+                field="clustering.centres",
+            )
         self.counts[STATES] = n
         self.centres_t = np.ascontiguousarray(centres.reshape(n, dim).T)
         self.stats = np.zeros((5, n))
-        self.stats[SQ_NORM] = stored.floats(data["sq_norms"], "clustering.sq_norms", (n,),
-                                            low=0.0)
+        self.stats[SQ_NORM] = stored.floats(data["sq_norms"], "clustering.sq_norms", (n,), low=0.0)
         norms = (centres.reshape(n, dim) ** 2).sum(axis=1)
         if not np.allclose(self.stats[SQ_NORM], norms, rtol=1e-9, atol=1e-12):
-            raise InvalidSnapshot("a squared norm is not its centre's",
-                                  field="clustering.sq_norms")
+            raise InvalidSnapshot("a squared norm is not its centre's", field="clustering.sq_norms")
         # P = 1 / (1 + mean squared distance): in (0, 1], up to the recursion's rounding (a
         # point seen twice in a row gives 1 + 2^-52)
-        self.stats[POTENTIAL] = stored.floats(data["potentials"], "clustering.potentials",
-                                              (n,), low=0.0, high=1.0 + 1e-9)
+        self.stats[POTENTIAL] = stored.floats(
+            data["potentials"], "clustering.potentials", (n,), low=0.0, high=1.0 + 1e-9
+        )
         self.stats[RADIUS] = stored.floats(data["radii"], "clustering.radii", (n,), low=0.0)
         self.support_counts = stored.ints(data["support"], "clustering.support", (n,), low=1)
-        self.stats[SCATTER] = stored.floats(data["scatter"], "clustering.scatter", (n,),
-                                            low=0.0)
+        self.stats[SCATTER] = stored.floats(data["scatter"], "clustering.scatter", (n,), low=0.0)
         spread = _SPREADS[config.spread]
         for i in range(n):
-            _refresh_variance(self.stats[VARIANCE], self.stats[RADIUS], self.support_counts,
-                              self.stats[SCATTER], i, spread, config.epsilon,
-                              config.min_variance)
+            _refresh_variance(
+                self.stats[VARIANCE],
+                self.stats[RADIUS],
+                self.support_counts,
+                self.stats[SCATTER],
+                i,
+                spread,
+                config.epsilon,
+                config.min_variance,
+            )
         return self
 
 
 NEW, REPLACED, ASSIGNED = 0, 1, 2
 _KINDS: dict[int, Literal["new", "replaced", "assigned"]] = {
-    NEW: "new", REPLACED: "replaced", ASSIGNED: "assigned"}
+    NEW: "new",
+    REPLACED: "replaced",
+    ASSIGNED: "assigned",
+}
 _SPREADS = {"radius": 0, "member_variance": 1, "ets2004": 2}
 
 
@@ -229,8 +258,9 @@ def _dot(x: FloatArray, y: FloatArray) -> float:
 
 
 @njit(cache=True)
-def _sq_distances(centres: FloatArray, sq_norms: FloatArray, n: int, z: FloatArray,
-                  theta: float, out: FloatArray) -> None:
+def _sq_distances(
+    centres: FloatArray, sq_norms: FloatArray, n: int, z: FloatArray, theta: float, out: FloatArray
+) -> None:
     """``out[i] = max(||c_i||^2 - 2 c_i.z + theta, 0)`` for the first n centres (dimension
     x state); each dot product summed over the dimensions in order, a dimension at a time
     across all states so that the loops vectorise."""
@@ -246,11 +276,19 @@ def _sq_distances(centres: FloatArray, sq_norms: FloatArray, n: int, z: FloatArr
 
 
 @njit(cache=True)
-def learn_and_recognise(z: FloatArray, centres: FloatArray, stats: FloatArray,
-                        support: npt.NDArray[np.int64], sums: FloatArray,
-                        counts: npt.NDArray[np.int64], params: FloatArray,
-                        modes: npt.NDArray[np.int64], top: int, index: npt.NDArray[np.int64],
-                        prob: FloatArray) -> tuple[int, int, int]:
+def learn_and_recognise(
+    z: FloatArray,
+    centres: FloatArray,
+    stats: FloatArray,
+    support: npt.NDArray[np.int64],
+    sums: FloatArray,
+    counts: npt.NDArray[np.int64],
+    params: FloatArray,
+    modes: npt.NDArray[np.int64],
+    top: int,
+    index: npt.NDArray[np.int64],
+    prob: FloatArray,
+) -> tuple[int, int, int]:
     """:meth:`EvolvingClusterer.learn_and_recognise` on its arrays (room for one more state):
     :func:`_learn`, then :func:`~app.core.belief._recognise` on the states after it, into
     ``index`` and ``prob``. Returns the update's kind, the state it touched and the belief's
@@ -259,9 +297,26 @@ def learn_and_recognise(z: FloatArray, centres: FloatArray, stats: FloatArray,
     n, d = counts[STATES], z.shape[0]
     d2 = np.empty(n + 1)
     kind, at, sigma, hit = _learn(
-        z, counts[SAMPLES], sums[:d], float(sums[d]), centres, stats[SQ_NORM], stats[POTENTIAL],
-        stats[RADIUS], support, stats[SCATTER], stats[VARIANCE], n, modes[2], params[0],
-        params[1], modes[0] == 1, modes[1], params[2], d2)
+        z,
+        counts[SAMPLES],
+        sums[:d],
+        float(sums[d]),
+        centres,
+        stats[SQ_NORM],
+        stats[POTENTIAL],
+        stats[RADIUS],
+        support,
+        stats[SCATTER],
+        stats[VARIANCE],
+        n,
+        modes[2],
+        params[0],
+        params[1],
+        modes[0] == 1,
+        modes[1],
+        params[2],
+        d2,
+    )
     sums[d] = sigma
     counts[CAPACITY_HITS] += hit
     if kind == NEW:
@@ -272,9 +327,16 @@ def learn_and_recognise(z: FloatArray, centres: FloatArray, stats: FloatArray,
 
 
 @njit(cache=True)
-def _refresh_variance(variances: FloatArray, radii: FloatArray, support: npt.NDArray[np.int64],
-                      scatter: FloatArray, i: int, spread: int, epsilon: float,
-                      min_variance: float) -> None:
+def _refresh_variance(
+    variances: FloatArray,
+    radii: FloatArray,
+    support: npt.NDArray[np.int64],
+    scatter: FloatArray,
+    i: int,
+    spread: int,
+    epsilon: float,
+    min_variance: float,
+) -> None:
     """var(s^i) of Eq. 1: r_i^2 (radius), the mean squared member distance
     (member_variance) or eTS-2004's r^2 / 4 for membership exp(-4 d^2 / r^2), floored."""
     if spread == 0:
@@ -287,20 +349,49 @@ def _refresh_variance(variances: FloatArray, radii: FloatArray, support: npt.NDA
 
 
 @njit(cache=True, error_model="numpy")  # no divisor is 0; without the check the loops vectorise
-def _learn(z: FloatArray, k: int, beta: FloatArray, sigma: float, centres: FloatArray,
-           sq_norms: FloatArray, potentials: FloatArray, radii: FloatArray,
-           support: npt.NDArray[np.int64], scatter: FloatArray, variances: FloatArray,
-           n: int, max_states: int, epsilon: float, rho: float, ets_plus: bool, spread: int,
-           min_variance: float, d2: FloatArray
-           ) -> tuple[int, int, float, int]:
+def _learn(
+    z: FloatArray,
+    k: int,
+    beta: FloatArray,
+    sigma: float,
+    centres: FloatArray,
+    sq_norms: FloatArray,
+    potentials: FloatArray,
+    radii: FloatArray,
+    support: npt.NDArray[np.int64],
+    scatter: FloatArray,
+    variances: FloatArray,
+    n: int,
+    max_states: int,
+    epsilon: float,
+    rho: float,
+    ets_plus: bool,
+    spread: int,
+    min_variance: float,
+    d2: FloatArray,
+) -> tuple[int, int, float, int]:
     """One eTS / eTS+ step on the arrays (capacity for n + 1 states): the update's kind,
     the state it touched, the new sigma and whether a candidate met the state limit. ``d2``
     gets the squared distances to every centre after the update."""
     theta = _dot(z, z)
     index, kind, hit = 0, NEW, 0
     if n == 0:  # first sample: centre 1 with potential 1
-        _add(z, theta, 1.0, centres, sq_norms, potentials, radii, support, scatter, variances,
-             0, epsilon, spread, min_variance)
+        _add(
+            z,
+            theta,
+            1.0,
+            centres,
+            sq_norms,
+            potentials,
+            radii,
+            support,
+            scatter,
+            variances,
+            0,
+            epsilon,
+            spread,
+            min_variance,
+        )
         d2[0] = 0.0
     else:
         _sq_distances(centres, sq_norms, n, z, theta, d2)
@@ -329,8 +420,22 @@ def _learn(z: FloatArray, k: int, beta: FloatArray, sigma: float, centres: Float
             _sq_distances(centres, sq_norms, n, z, theta, d2)
             index, kind = nearest, REPLACED
         elif candidate and n < max_states:
-            _add(z, theta, p_new, centres, sq_norms, potentials, radii, support, scatter,
-                 variances, n, epsilon, spread, min_variance)
+            _add(
+                z,
+                theta,
+                p_new,
+                centres,
+                sq_norms,
+                potentials,
+                radii,
+                support,
+                scatter,
+                variances,
+                n,
+                epsilon,
+                spread,
+                min_variance,
+            )
             d2[n] = 0.0
             index = n
         else:
@@ -340,8 +445,9 @@ def _learn(z: FloatArray, k: int, beta: FloatArray, sigma: float, centres: Float
             scatter[nearest] += d2[nearest]
             local = math.sqrt(scatter[nearest] / support[nearest])
             radii[nearest] = rho * radii[nearest] + (1.0 - rho) * local
-            _refresh_variance(variances, radii, support, scatter, nearest, spread, epsilon,
-                              min_variance)
+            _refresh_variance(
+                variances, radii, support, scatter, nearest, spread, epsilon, min_variance
+            )
             index, kind = nearest, ASSIGNED
     for i in range(beta.shape[0]):
         beta[i] += z[i]
@@ -349,10 +455,22 @@ def _learn(z: FloatArray, k: int, beta: FloatArray, sigma: float, centres: Float
 
 
 @njit(cache=True)
-def _add(z: FloatArray, theta: float, potential: float, centres: FloatArray,
-         sq_norms: FloatArray, potentials: FloatArray, radii: FloatArray,
-         support: npt.NDArray[np.int64], scatter: FloatArray, variances: FloatArray, n: int,
-         epsilon: float, spread: int, min_variance: float) -> None:
+def _add(
+    z: FloatArray,
+    theta: float,
+    potential: float,
+    centres: FloatArray,
+    sq_norms: FloatArray,
+    potentials: FloatArray,
+    radii: FloatArray,
+    support: npt.NDArray[np.int64],
+    scatter: FloatArray,
+    variances: FloatArray,
+    n: int,
+    epsilon: float,
+    spread: int,
+    min_variance: float,
+) -> None:
     centres[:, n] = z
     sq_norms[n] = theta
     potentials[n] = potential

@@ -45,8 +45,18 @@ from app.core import (
 from app.core.config import ShieldConfig
 from app.core.shield import Shield
 
-MODULES: tuple[ModuleType, ...] = (_kernels, observation, clustering, belief, flags, lazy_tpm,
-                                   local_risk, reach, risk, step)
+MODULES: tuple[ModuleType, ...] = (
+    _kernels,
+    observation,
+    clustering,
+    belief,
+    flags,
+    lazy_tpm,
+    local_risk,
+    reach,
+    risk,
+    step,
+)
 STAMP = "core-sources.sha256"  # the fingerprint's file, in each folder of the cache
 
 log = logging.getLogger(__name__)
@@ -92,8 +102,10 @@ def version() -> str:
 def cache_folders() -> set[Path]:
     """The folders where numba keeps the core's kernels (one, unless the modules moved)."""
     # (numba has no public name for it: its cache's folder, as its locator chose it)
-    return {Path(kernel._cache._cache_path)  # type: ignore[attr-defined]
-            for kernel in kernels()}
+    return {
+        Path(kernel._cache._cache_path)  # type: ignore[attr-defined]
+        for kernel in kernels()
+    }
 
 
 def keep_cache_current() -> list[Path]:
@@ -119,12 +131,18 @@ def keep_cache_current() -> list[Path]:
                 file.write(current)
             os.replace(file.name, stamp)
         except OSError as error:
-            log.warning("the compiled core's cache in %s cannot be refreshed (%s): its kernels "
-                        "may be older than their sources; set NUMBA_CACHE_DIR to a writable "
-                        "folder", folder, error)
+            log.warning(
+                "the compiled core's cache in %s cannot be refreshed (%s): its kernels "
+                "may be older than their sources; set NUMBA_CACHE_DIR to a writable "
+                "folder",
+                folder,
+                error,
+            )
             continue
-        log.info("the core's sources differ from its compiled cache in %s: its kernels "
-                 "compile again", folder)
+        log.info(
+            "the core's sources differ from its compiled cache in %s: its kernels compile again",
+            folder,
+        )
         cleared.append(folder)
     return cleared
 
@@ -148,9 +166,11 @@ def presets() -> tuple[ShieldConfig, ...]:
     """The default, the paper's reviser and its literal reading, each reviser active after one
     episode, so that a short loop reaches every path of the step."""
     return tuple(
-        dataclasses.replace(config, reviser=dataclasses.replace(config.reviser,
-                                                                activate_after_episodes=1))
-        for config in (ShieldConfig(), ShieldConfig.paper(), ShieldConfig.paper_literal()))
+        dataclasses.replace(
+            config, reviser=dataclasses.replace(config.reviser, activate_after_episodes=1)
+        )
+        for config in (ShieldConfig(), ShieldConfig.paper(), ShieldConfig.paper_literal())
+    )
 
 
 def _drive(shield: Shield) -> Shield:

@@ -45,8 +45,11 @@ def _check(ok: bool, field_name: str, message: str) -> None:
 
 def _check_range(low: float, high: float, field_name: str) -> None:
     """A range of physical values: both ends within +-MAX_PHYSICAL, at least MIN_SPAN wide."""
-    _check(all(math.isfinite(v) and abs(v) <= MAX_PHYSICAL for v in (low, high)), field_name,
-           f"bounds are finite and within +-{MAX_PHYSICAL:g}")
+    _check(
+        all(math.isfinite(v) and abs(v) <= MAX_PHYSICAL for v in (low, high)),
+        field_name,
+        f"bounds are finite and within +-{MAX_PHYSICAL:g}",
+    )
     _check(high - low >= MIN_SPAN, "high", f"high must exceed low by at least {MIN_SPAN:g}")
 
 
@@ -75,11 +78,15 @@ class Feature:
     def __post_init__(self) -> None:
         _check_name(self.name, "name")
         for name, values in (("weights", self.weights), ("divide_by", self.divide_by)):
-            _check(all(abs(w) <= MAX_WEIGHT for w in values), name,  # (NaN fails it too)
-                   f"weights are finite and within +-{MAX_WEIGHT:g}")
+            _check(
+                all(abs(w) <= MAX_WEIGHT for w in values),
+                name,  # (NaN fails it too)
+                f"weights are finite and within +-{MAX_WEIGHT:g}",
+            )
         _check_range(self.low, self.high, "low")
-        _check(1e-9 <= self.floor <= MAX_PHYSICAL, "floor",
-               f"floor lies in [1e-9, {MAX_PHYSICAL:g}]")
+        _check(
+            1e-9 <= self.floor <= MAX_PHYSICAL, "floor", f"floor lies in [1e-9, {MAX_PHYSICAL:g}]"
+        )
 
 
 @dataclass(frozen=True)
@@ -111,8 +118,11 @@ class ObservationSpec:
 
     def __post_init__(self) -> None:
         _check(len(self.names) >= 1, "names", "at least one observation dimension is needed")
-        _check(len(self.names) + len(self.features) <= MAX_DIMENSIONS, "names",
-               f"at most {MAX_DIMENSIONS} names and features together")
+        _check(
+            len(self.names) + len(self.features) <= MAX_DIMENSIONS,
+            "names",
+            f"at most {MAX_DIMENSIONS} names and features together",
+        )
         _check(len(set(self.names)) == len(self.names), "names", "names must be unique")
         for i, name in enumerate(self.names):
             _check_name(name, f"names.{i}")
@@ -124,20 +134,38 @@ class ObservationSpec:
             except InvalidConfig as error:
                 error.field = f"{error.field}.{i}" if error.field == "high" else error.field
                 raise
-        _check(len(self.knee) in (0, len(self.names)), "knee",
-               "knee is empty or one per name (the default is for the paper's three names)")
-        _check(all(0 <= k <= MAX_PHYSICAL for k in self.knee), "knee",  # (NaN fails it too)
-               f"every knee lies in [0, {MAX_PHYSICAL:g}]")
+        _check(
+            len(self.knee) in (0, len(self.names)),
+            "knee",
+            "knee is empty or one per name (the default is for the paper's three names)",
+        )
+        _check(
+            all(0 <= k <= MAX_PHYSICAL for k in self.knee),
+            "knee",  # (NaN fails it too)
+            f"every knee lies in [0, {MAX_PHYSICAL:g}]",
+        )
         for i, feature in enumerate(self.features):
-            _check(len(feature.weights) == len(self.names), f"features.{i}.weights",
-                   "a feature needs one weight per observation name")
-            _check(len(feature.divide_by) in (0, len(self.names)), f"features.{i}.divide_by",
-                   "divide_by is empty or one weight per observation name")
-        _check(self.cluster_raw or bool(self.features), "cluster_raw",
-               "without the raw observation, at least one feature is needed")
+            _check(
+                len(feature.weights) == len(self.names),
+                f"features.{i}.weights",
+                "a feature needs one weight per observation name",
+            )
+            _check(
+                len(feature.divide_by) in (0, len(self.names)),
+                f"features.{i}.divide_by",
+                "divide_by is empty or one weight per observation name",
+            )
+        _check(
+            self.cluster_raw or bool(self.features),
+            "cluster_raw",
+            "without the raw observation, at least one feature is needed",
+        )
         names = list(self.names) + [f.name for f in self.features]
-        _check(len(set(names)) == len(names), "features", "feature names must be unique "
-               "and differ from the observation's names")
+        _check(
+            len(set(names)) == len(names),
+            "features",
+            "feature names must be unique and differ from the observation's names",
+        )
 
     @property
     def size(self) -> int:
@@ -185,13 +213,22 @@ class Bound:
 
     def __post_init__(self) -> None:
         _check(bool(self.observation), "observation", "a bound names an observation")
-        _check(self.below is not None or self.above is not None, "below",
-               "a bound needs below, above or both")
+        _check(
+            self.below is not None or self.above is not None,
+            "below",
+            "a bound needs below, above or both",
+        )
         for name, value in (("below", self.below), ("above", self.above)):
-            _check(value is None or abs(value) <= MAX_PHYSICAL, name,  # (NaN fails it too)
-                   f"must be finite and within +-{MAX_PHYSICAL:g}")
-        _check(self.below is None or self.above is None or self.below < self.above, "above",
-               "above must exceed below")
+            _check(
+                value is None or abs(value) <= MAX_PHYSICAL,
+                name,  # (NaN fails it too)
+                f"must be finite and within +-{MAX_PHYSICAL:g}",
+            )
+        _check(
+            self.below is None or self.above is None or self.below < self.above,
+            "above",
+            "above must exceed below",
+        )
 
 
 @dataclass(frozen=True)
@@ -251,8 +288,9 @@ class ClusteringConfig:
         # the clustering space spans about [0, 1] a dimension (a knee: [0, 2])
         _check(0.0 <= self.rho <= 1.0, "rho", "rho lies in [0, 1]")  # (NaN fails it too)
         _check(0.0 < self.epsilon <= 10.0, "epsilon", "epsilon lies in (0, 10]")
-        _check(1e-12 <= self.min_variance <= 100.0, "min_variance",
-               "min_variance lies in [1e-12, 100]")
+        _check(
+            1e-12 <= self.min_variance <= 100.0, "min_variance", "min_variance lies in [1e-12, 100]"
+        )
 
 
 @dataclass(frozen=True)
@@ -306,8 +344,11 @@ class ReviserConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _check(0 <= self.activate_after_episodes < 2**63, "activate_after_episodes",
-               "lies in [0, 2**63)")
+        _check(
+            0 <= self.activate_after_episodes < 2**63,
+            "activate_after_episodes",
+            "lies in [0, 2**63)",
+        )
         _check(0.0 <= self.noise_k <= 1e6, "noise_k", "noise_k lies in [0, 1e6]")
         _check(1 <= self.horizon <= 16, "horizon", "horizon lies in [1, 16]")
         _check(0.0 < self.flag_min_rate <= 1.0, "flag_min_rate", "lies in (0, 1]")
@@ -341,10 +382,12 @@ class RiskConfig:
         _check(1 <= self.horizon <= 256, "horizon", "horizon lies in [1, 256]")
         _check(0.0 <= self.threshold <= 1.0, "threshold", "threshold lies in [0, 1]")
         _check(0.0 <= self.margin <= 1.0, "margin", "margin lies in [0, 1]")
-        _check(0 <= self.reach_horizon <= 1024, "reach_horizon",
-               "reach_horizon lies in [0, 1024]")
-        _check(0.0 < self.reach_radius <= 10.0, "reach_radius",  # (NaN fails it too)
-               "reach_radius lies in (0, 10]")
+        _check(0 <= self.reach_horizon <= 1024, "reach_horizon", "reach_horizon lies in [0, 1024]")
+        _check(
+            0.0 < self.reach_radius <= 10.0,
+            "reach_radius",  # (NaN fails it too)
+            "reach_radius lies in (0, 10]",
+        )
 
 
 @dataclass(frozen=True)
@@ -367,8 +410,7 @@ class LimitsConfig:
     def __post_init__(self) -> None:
         _check(1 <= self.max_states <= 1_000_000, "max_states", "lies in [1, 1000000]")
         _check(1 <= self.max_streams <= 1_000_000, "max_streams", "lies in [1, 1000000]")
-        _check(1 <= self.belief_top_k <= MAX_TOP_K, "belief_top_k",
-               f"lies in [1, {MAX_TOP_K}]")
+        _check(1 <= self.belief_top_k <= MAX_TOP_K, "belief_top_k", f"lies in [1, {MAX_TOP_K}]")
 
 
 @dataclass(frozen=True)
@@ -391,24 +433,34 @@ class ShieldConfig:
         _check(len(set(names)) == len(names), "criteria", "criterion names must be unique")
         observed = self.observation.names
         for i, criterion in enumerate(self.criteria):
-            _check(criterion.direction is not None or self.reviser.method == "risk",
-                   f"criteria.{i}.direction", "the paper's reviser searches along a "
-                   "direction: declare one, or use the risk reviser")
+            _check(
+                criterion.direction is not None or self.reviser.method == "risk",
+                f"criteria.{i}.direction",
+                "the paper's reviser searches along a "
+                "direction: declare one, or use the risk reviser",
+            )
             if criterion.bound is None:
                 continue
-            _check(criterion.bound.observation in observed, f"criteria.{i}.bound.observation",
-                   f"{criterion.bound.observation!r} is not an observation name "
-                   f"({', '.join(observed)}); a custom observation declares its own criteria")
-            _check(self.observation.cluster_raw, f"criteria.{i}.bound",
-                   "a bound needs the observation clustered (observation.cluster_raw); "
-                   "declare the criteria without bounds")
+            _check(
+                criterion.bound.observation in observed,
+                f"criteria.{i}.bound.observation",
+                f"{criterion.bound.observation!r} is not an observation name "
+                f"({', '.join(observed)}); a custom observation declares its own criteria",
+            )
+            _check(
+                self.observation.cluster_raw,
+                f"criteria.{i}.bound",
+                "a bound needs the observation clustered (observation.cluster_raw); "
+                "declare the criteria without bounds",
+            )
 
     @classmethod
     def paper(cls, **overrides: Any) -> ShieldConfig:
         """The paper's reviser (flags on predicted states, activated after 50 episodes) with
         this project's readings of its gaps: the default before the risk reviser."""
         return dataclasses.replace(
-            cls(reviser=ReviserConfig(method="paper", activate_after_episodes=50)), **overrides)
+            cls(reviser=ReviserConfig(method="paper", activate_after_episodes=50)), **overrides
+        )
 
     @classmethod
     def paper_literal(cls, **overrides: Any) -> ShieldConfig:
@@ -449,9 +501,11 @@ class ShieldConfig:
             raise InvalidConfig("expected an object")
         if "version" in data:
             if data["version"] != CONFIG_VERSION:
-                raise InvalidConfig(f"expected version {CONFIG_VERSION}; a stored configuration "
-                                    "of an older version loads through from_stored",
-                                    field="version")
+                raise InvalidConfig(
+                    f"expected version {CONFIG_VERSION}; a stored configuration "
+                    "of an older version loads through from_stored",
+                    field="version",
+                )
             data = {key: value for key, value in data.items() if key != "version"}
         return _build(cls, data, "")
 
@@ -536,8 +590,9 @@ def _require(part: Any, keys: list[str], at: str) -> None:
     if not isinstance(part, Mapping):
         return
     if key not in part:
-        raise InvalidConfig(f"the stored configuration lacks {_join(at, key)!r}",
-                            field=_join(at, key))
+        raise InvalidConfig(
+            f"the stored configuration lacks {_join(at, key)!r}", field=_join(at, key)
+        )
     _require(part[key], rest, _join(at, key))
 
 
@@ -608,28 +663,33 @@ def _from_version_4(data: Mapping[str, Any]) -> dict[str, Any]:
     criteria out gets the paper's without them (one that lists them lacks bounds already;
     versions 2 to 4 always list them, :func:`_check_written`)."""
     out = _copy(data)
-    out.setdefault("criteria", [{"name": c.name, "direction": c.direction}
-                                for c in PAPER_CRITERIA])
+    out.setdefault("criteria", [{"name": c.name, "direction": c.direction} for c in PAPER_CRITERIA])
     out["version"] = CONFIG_VERSION
     return out
 
 
 def _copy(data: Mapping[str, Any]) -> dict[str, Any]:
-    return {key: dict(value) if isinstance(value, Mapping) else value
-            for key, value in data.items()}
+    return {
+        key: dict(value) if isinstance(value, Mapping) else value for key, value in data.items()
+    }
 
 
-def _remove(sections: dict[str, dict[str, Any]],
-            removed: tuple[tuple[str, str, Any, Any, bool], ...], version: int) -> None:
+def _remove(
+    sections: dict[str, dict[str, Any]],
+    removed: tuple[tuple[str, str, Any, Any, bool], ...],
+    version: int,
+) -> None:
     """Drop removed fields; one whose value (or its value when missing) is not the behaviour
     that remains, where that matters, is refused."""
     for section, name, missing, remains, counts in removed:
         part = sections.get(section, {})
         value = part.pop(name, missing)
         if counts and value != remains:
-            raise InvalidConfig(f"{section}.{name} = {value!r} was removed in configuration "
-                                f"version {version}; this version cannot reproduce it",
-                                field=f"{section}.{name}")
+            raise InvalidConfig(
+                f"{section}.{name} = {value!r} was removed in configuration "
+                f"version {version}; this version cannot reproduce it",
+                field=f"{section}.{name}",
+            )
 
 
 def _lists(value: Any) -> Any:

@@ -27,8 +27,7 @@ class StateFlags:
     ``table`` (flag, visits and entries, one row each, per state) and ``failures`` (states x
     criteria), arrays a compiled step takes whole."""
 
-    def __init__(self, mode: FlagMode, max_states: int, n_criteria: int,
-                 min_rate: float) -> None:
+    def __init__(self, mode: FlagMode, max_states: int, n_criteria: int, min_rate: float) -> None:
         self.mode = mode
         self.max_states = max_states
         self.min_rate = min_rate
@@ -92,8 +91,15 @@ class StateFlags:
         covers much ordinary driving is not condemned by one failure at its edge, and one where
         cars wait for minutes per visit does not dilute the failures that end there.
         """
-        if observe(self.table, self._failures, state, -1 if criterion is None else criterion,
-                   entered, self.mode == "rate", self.min_rate):
+        if observe(
+            self.table,
+            self._failures,
+            state,
+            -1 if criterion is None else criterion,
+            entered,
+            self.mode == "rate",
+            self.min_rate,
+        ):
             self.changed()
 
     def changed(self) -> None:
@@ -102,13 +108,17 @@ class StateFlags:
 
     def snapshot(self) -> dict[str, Any]:
         """Exact state."""
-        return {"flags": self.flags.copy(),
-                "visits": self.visits.copy(), "entries": self.entries.copy(),
-                "failures": self.failures.copy()}
+        return {
+            "flags": self.flags.copy(),
+            "visits": self.visits.copy(),
+            "entries": self.entries.copy(),
+            "failures": self.failures.copy(),
+        }
 
     @classmethod
-    def restore(cls, mode: FlagMode, max_states: int, n_criteria: int, min_rate: float,
-                data: dict[str, Any]) -> StateFlags:
+    def restore(
+        cls, mode: FlagMode, max_states: int, n_criteria: int, min_rate: float, data: dict[str, Any]
+    ) -> StateFlags:
         """Rebuild from :meth:`snapshot` output. Snapshots from before entries were counted
         lack them: they count from the restore on."""
         self = cls(mode, max_states, n_criteria, min_rate)
@@ -116,8 +126,13 @@ class StateFlags:
         n = self._n = flags.shape[0]
         if n > max_states:
             raise InvalidSnapshot(f"more than {max_states} states", field="flags.flags")
-        self.table = np.stack([flags, stored.ints(data["visits"], "flags.visits", (n,)),
-                               _counts(data.get("entries"), "flags.entries", n)])
+        self.table = np.stack(
+            [
+                flags,
+                stored.ints(data["visits"], "flags.visits", (n,)),
+                _counts(data.get("entries"), "flags.entries", n),
+            ]
+        )
         self._failures = stored.ints(data["failures"], "flags.failures", (n, n_criteria))
         return self
 
@@ -129,8 +144,15 @@ def _counts(data: Any, field: str, n: int) -> IntArray:
 
 
 @njit(cache=True)
-def observe(table: IntArray, failures: IntArray, state: int, criterion: int, entered: bool,
-            rate: bool, min_rate: float) -> bool:
+def observe(
+    table: IntArray,
+    failures: IntArray,
+    state: int,
+    criterion: int,
+    entered: bool,
+    rate: bool,
+    min_rate: float,
+) -> bool:
     """:meth:`StateFlags.observe` on its arrays (``criterion`` -1: none, ``rate``: the rate
     mode); whether the state's flag changed."""
     table[VISITS, state] += 1

@@ -75,8 +75,9 @@ class History:
         return {"stride": self.stride, "rows": self.rows.copy()}
 
     @classmethod
-    def restore(cls, n_criteria: int, data: dict[str, Any], latest: Sequence[int],
-                limit: int = LIMIT) -> History:
+    def restore(
+        cls, n_criteria: int, data: dict[str, Any], latest: Sequence[int], limit: int = LIMIT
+    ) -> History:
         """A history from :meth:`snapshot`'s data, checked: at most ``limit`` rows of totals
         that never decrease, on the stride, none beyond the model's ``latest`` totals."""
         self = cls(n_criteria, limit)
@@ -86,19 +87,23 @@ class History:
         raw = data["rows"]
         k = np.shape(raw)[0] if np.ndim(raw) == 2 else -1
         if not 0 <= k <= limit:
-            raise InvalidSnapshot(f"expected at most {limit} rows of {self._columns} totals",
-                                  field="history.rows")
+            raise InvalidSnapshot(
+                f"expected at most {limit} rows of {self._columns} totals", field="history.rows"
+            )
         rows = stored.ints(raw, "history.rows", (k, self._columns))
         if k:
             if (np.diff(rows, axis=0) < 0).any() or (np.diff(rows[:, EPISODES]) == 0).any():
-                raise InvalidSnapshot("a row's totals are below the row before it",
-                                      field="history.rows")
+                raise InvalidSnapshot(
+                    "a row's totals are below the row before it", field="history.rows"
+                )
             if (rows[:, EPISODES] % stride).any() or (rows[:, EPISODES] == 0).any():
-                raise InvalidSnapshot(f"a row ends an episode off the stride {stride}",
-                                      field="history.rows")
+                raise InvalidSnapshot(
+                    f"a row ends an episode off the stride {stride}", field="history.rows"
+                )
             if (rows[-1] > np.asarray(latest)).any():
-                raise InvalidSnapshot("the last row's totals exceed the model's counters",
-                                      field="history.rows")
+                raise InvalidSnapshot(
+                    "the last row's totals exceed the model's counters", field="history.rows"
+                )
         self.stride = stride
         self._rows = rows.copy()
         self._n = k

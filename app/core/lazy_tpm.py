@@ -76,8 +76,14 @@ class LazyTransitions:
 
     def _views(self) -> None:
         """Name the rows of the per-row arrays (again after they grow)."""
-        (self._offset, self._row_sum, self._log_pad, self._log_level, self._learned_scale,
-         self._pad_scale) = self._rows
+        (
+            self._offset,
+            self._row_sum,
+            self._log_pad,
+            self._log_level,
+            self._learned_scale,
+            self._pad_scale,
+        ) = self._rows
         self._nnz, self._start, self._cap = self._row_counts
 
     @property
@@ -85,13 +91,21 @@ class LazyTransitions:
         """Current matrix size n."""
         return self._n
 
-    def arrays(self) -> tuple[FloatArray, FloatArray, IntArray, ColArray, FloatArray, IntArray,
-                              IntArray]:
+    def arrays(
+        self,
+    ) -> tuple[FloatArray, FloatArray, IntArray, ColArray, FloatArray, IntArray, IntArray]:
         """What a compiled step learns a transition with (:func:`learn`'s arrays, in order):
         the same tuple until a state is added or the pool is compacted."""
         if self._arrays is None:
-            self._arrays = (self._log_decay, self._rows, self._row_counts, self._pool_cols,
-                            self._pool_vals, self._used, self._scratch)
+            self._arrays = (
+                self._log_decay,
+                self._rows,
+                self._row_counts,
+                self._pool_cols,
+                self._pool_vals,
+                self._used,
+                self._scratch,
+            )
         return self._arrays
 
     def add_state(self) -> None:
@@ -139,7 +153,8 @@ class LazyTransitions:
         rows ``at`` whose offsets and learned sums are given (one implementation with the
         learning kernel's, :func:`_row_scales`, so that a restored row scales as learned)."""
         self._learned_scale[at], self._pad_scale[at] = _scales(
-            self._log_pad[at], self._log_level[at], offset, row_sum)
+            self._log_pad[at], self._log_level[at], offset, row_sum
+        )
 
     def learn_one(self, prev: Belief, action_bin: int, belief: Belief) -> None:
         """Eqs. 3-4 with tau = prev, gamma = belief, for the matrix of ``action_bin``.
@@ -148,8 +163,15 @@ class LazyTransitions:
         ``S += phi tau gamma^T / D``; touched rows are first re-based to the new scale.
         """
         while True:
-            needed = learn(action_bin, self.config.learning_rate, prev.index, prev.prob,
-                           belief.index, belief.prob, *self.arrays())
+            needed = learn(
+                action_bin,
+                self.config.learning_rate,
+                prev.index,
+                prev.prob,
+                belief.index,
+                belief.prob,
+                *self.arrays(),
+            )
             if not needed:
                 return
             self.compact(needed)
@@ -162,8 +184,15 @@ class LazyTransitions:
         size = max(2 * (live + extra), 64)
         cols = np.zeros(size, dtype=np.int32)
         vals = np.zeros(size)
-        self._used[0] = _compact(self._start[:, :n], self._cap[:, :n], self._nnz[:, :n],
-                                 self._pool_cols, self._pool_vals, cols, vals)
+        self._used[0] = _compact(
+            self._start[:, :n],
+            self._cap[:, :n],
+            self._nnz[:, :n],
+            self._pool_cols,
+            self._pool_vals,
+            cols,
+            vals,
+        )
         self._pool_cols, self._pool_vals = cols, vals
         self._arrays = None
 
@@ -173,8 +202,9 @@ class LazyTransitions:
         n = self._n
         nnz = self._nnz[a, :n]
         rows = np.repeat(np.arange(n), nnz)
-        at = np.repeat(self._start[a, :n], nnz) + (np.arange(rows.size)
-                                                   - np.repeat(np.cumsum(nnz) - nnz, nnz))
+        at = np.repeat(self._start[a, :n], nnz) + (
+            np.arange(rows.size) - np.repeat(np.cumsum(nnz) - nnz, nnz)
+        )
         return rows, self._pool_cols[at], self._pool_vals[at]
 
     def predict(self, belief: Belief, action_bin: int, transpose: bool) -> FloatArray:
@@ -187,8 +217,9 @@ class LazyTransitions:
         n, rows, p = self._n, belief.index, belief.prob
         learned = p * self._learned_scale[a][rows]
         pred = np.zeros(n)
-        _add_learned(rows, learned, self._start[a], self._nnz[a], self._pool_cols,
-                     self._pool_vals, pred)
+        _add_learned(
+            rows, learned, self._start[a], self._nnz[a], self._pool_cols, self._pool_vals, pred
+        )
         c = p * self._pad_scale[a][rows]
         mode = self.config.expansion
         if mode == "prior":
@@ -218,8 +249,15 @@ class LazyTransitions:
         learned = p * self._learned_scale[:, rows]  # (q, k)
         pred = np.zeros((q, n))
         for a in range(q):  # each action's entries summed in the order its own would be
-            _add_learned(rows, learned[a], self._start[a], self._nnz[a], self._pool_cols,
-                         self._pool_vals, pred[a])
+            _add_learned(
+                rows,
+                learned[a],
+                self._start[a],
+                self._nnz[a],
+                self._pool_cols,
+                self._pool_vals,
+                pred[a],
+            )
         c = p * self._pad_scale[:, rows]
         mode = self.config.expansion
         if mode == "prior":
@@ -227,8 +265,9 @@ class LazyTransitions:
             c.cumsum(axis=1, out=below[:, 1:])
             weighted = _suffix_sums(c * self._pad[:, rows])
             segment = belief.segments(n)
-            pred += (self._pad[:, :n] * below.repeat(segment, axis=1)
-                     + weighted.repeat(segment, axis=1))
+            pred += self._pad[:, :n] * below.repeat(segment, axis=1) + weighted.repeat(
+                segment, axis=1
+            )
         elif mode == "zero_uniform":
             pred += _suffix_sums(c).repeat(belief.segments(n), axis=1)
         else:
@@ -297,8 +336,14 @@ class LazyTransitions:
     def nbytes(self) -> int:
         """Memory held by the matrices."""
         arrays: list[npt.NDArray[Any]] = [
-            self._created, self._pad, self._pad_tail, self._rows, self._row_counts,
-            self._scratch, self._pool_cols, self._pool_vals,
+            self._created,
+            self._pad,
+            self._pad_tail,
+            self._rows,
+            self._row_counts,
+            self._scratch,
+            self._pool_cols,
+            self._pool_vals,
         ]
         return sum(int(x.nbytes) for x in arrays)
 
@@ -336,16 +381,17 @@ class LazyTransitions:
         n = stored.integer(data["n_states"], "transitions.n_states", high=max_states)
         q = n_actions
         self._n = n
-        self._log_decay = stored.floats(data["log_decay"], "transitions.log_decay", (q,),
-                                        high=0.0)
+        self._log_decay = stored.floats(data["log_decay"], "transitions.log_decay", (q,), high=0.0)
         self._created = stored.floats(data["created"], "transitions.created", (q, n))
         # every scale was -ld_a when it was set, and ld_a only falls: 0 <= scale <= -ld_a now,
         # and states appeared in order (an offset beyond would make a row's mass infinite)
         latest = -self._log_decay[:, None] * (1 + 1e-12) + 1e-12
-        if ((self._created < 0) | (self._created > latest)).any() or \
-                (np.diff(self._created, axis=1) < 0).any():
-            raise InvalidSnapshot("a state's creation lies outside the decays so far",
-                                  field="transitions.created")
+        if ((self._created < 0) | (self._created > latest)).any() or (
+            np.diff(self._created, axis=1) < 0
+        ).any():
+            raise InvalidSnapshot(
+                "a state's creation lies outside the decays so far", field="transitions.created"
+            )
         self._pad = np.zeros((q, n))
         self._pad_tail = np.zeros((q, n + 1))
         self._rows = np.zeros((6, q, n))
@@ -356,29 +402,33 @@ class LazyTransitions:
         pool_cols: list[ColArray] = []
         pool_vals: list[FloatArray] = []
         if not isinstance(entries, list) or len(entries) != q:
-            raise InvalidSnapshot(f"expected one entry per action ({q})",
-                                  field="transitions.actions")
+            raise InvalidSnapshot(
+                f"expected one entry per action ({q})", field="transitions.actions"
+            )
         for a, entry in enumerate(entries):
             field = f"transitions.actions.{a}"
             width = stored.integer(entry["width"], f"{field}.width", high=max(2 * n, 8))
             nnz = stored.ints(entry["nnz"], f"{field}.nnz", (n,), high=min(width, n))
             self._nnz[a] = nnz
-            self._offset[a] = stored.floats(entry["offset"], f"{field}.offset", (n,), low=0.0,
-                                            high=float(latest[a, 0]))
-            self._row_sum[a] = stored.floats(entry["row_sum"], f"{field}.row_sum", (n,),
-                                             low=0.0)
+            self._offset[a] = stored.floats(
+                entry["offset"], f"{field}.offset", (n,), low=0.0, high=float(latest[a, 0])
+            )
+            self._row_sum[a] = stored.floats(entry["row_sum"], f"{field}.row_sum", (n,), low=0.0)
             total = int(nnz.sum())
-            cols = stored.ints(entry["cols"], f"{field}.cols", (total,), high=max(n - 1, 0),
-                               dtype=np.int32)
+            cols = stored.ints(
+                entry["cols"], f"{field}.cols", (total,), high=max(n - 1, 0), dtype=np.int32
+            )
             vals = stored.floats(entry["vals"], f"{field}.vals", (total,), low=0.0)
             rows = np.repeat(np.arange(n, dtype=np.int64), nnz)
             if np.unique(rows * max(n, 1) + cols).size != total:
                 raise InvalidSnapshot("a row names a next state twice", field=f"{field}.cols")
             # each row's learned sum is its entries' (nnz 0: nothing learned, a sum of 0)
-            if not np.allclose(np.bincount(rows, weights=vals, minlength=n), self._row_sum[a],
-                               rtol=1e-6, atol=0.0):
-                raise InvalidSnapshot("a row's learned sum is not the sum of its entries",
-                                      field=f"{field}.row_sum")
+            if not np.allclose(
+                np.bincount(rows, weights=vals, minlength=n), self._row_sum[a], rtol=1e-6, atol=0.0
+            ):
+                raise InvalidSnapshot(
+                    "a row's learned sum is not the sum of its entries", field=f"{field}.row_sum"
+                )
             self._cap[a] = nnz
             pool_cols.append(cols)
             pool_vals.append(vals)
@@ -400,8 +450,9 @@ def _row_log_norm(log_pad: float, offset: float, row_sum: float) -> float:
 
 
 @njit(cache=True)
-def _row_scales(log_pad: float, log_level: float, offset: float, row_sum: float
-                ) -> tuple[float, float]:
+def _row_scales(
+    log_pad: float, log_level: float, offset: float, row_sum: float
+) -> tuple[float, float]:
     """A row's learned and padding scales (see :meth:`LazyTransitions._refresh_scales`)."""
     log_norm = _row_log_norm(log_pad, offset, row_sum)
     return math.exp(offset - log_norm), math.exp(log_level - log_norm)
@@ -417,15 +468,17 @@ def _log_norm(log_pad: FloatArray, offset: FloatArray, row_sum: FloatArray) -> F
 
 
 @njit(cache=True)
-def _scales(log_pad: FloatArray, log_level: FloatArray, offset: FloatArray,
-            row_sum: FloatArray) -> tuple[FloatArray, FloatArray]:
+def _scales(
+    log_pad: FloatArray, log_level: FloatArray, offset: FloatArray, row_sum: FloatArray
+) -> tuple[FloatArray, FloatArray]:
     """:func:`_row_scales` of every row (actions x states): their learned and padding
     scales."""
     learned, pad = np.empty_like(log_pad), np.empty_like(log_pad)
     for a in range(log_pad.shape[0]):
         for i in range(log_pad.shape[1]):
-            learned[a, i], pad[a, i] = _row_scales(log_pad[a, i], log_level[a, i],
-                                                   offset[a, i], row_sum[a, i])
+            learned[a, i], pad[a, i] = _row_scales(
+                log_pad[a, i], log_level[a, i], offset[a, i], row_sum[a, i]
+            )
     return learned, pad
 
 
@@ -438,9 +491,21 @@ def _suffix_sums(x: FloatArray) -> FloatArray:
 
 
 @njit(cache=True)
-def learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
-          gamma: FloatArray, log_decay: FloatArray, numbers: FloatArray, counts: IntArray,
-          pool_cols: ColArray, pool_vals: FloatArray, used: IntArray, slots: IntArray) -> int:
+def learn(
+    a: int,
+    lr: float,
+    rows: IntArray,
+    tau: FloatArray,
+    cols: IntArray,
+    gamma: FloatArray,
+    log_decay: FloatArray,
+    numbers: FloatArray,
+    counts: IntArray,
+    pool_cols: ColArray,
+    pool_vals: FloatArray,
+    used: IntArray,
+    slots: IntArray,
+) -> int:
     """:meth:`LazyTransitions.learn_one` on action ``a``'s rows (``numbers`` and ``counts``
     are the per-row arrays, :meth:`LazyTransitions.arrays`). Returns 0, or, changing
     nothing, the slots it needs at the pool's end when the rows that must move there (to
@@ -450,7 +515,13 @@ def learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
     cleared again, so that finding the entries costs O(k W) whatever n is.
     """
     offset, row_sum, log_pad, log_level, learned_scale, pad_scale = (
-        numbers[0], numbers[1], numbers[2], numbers[3], numbers[4], numbers[5])
+        numbers[0],
+        numbers[1],
+        numbers[2],
+        numbers[3],
+        numbers[4],
+        numbers[5],
+    )
     nnz, start, cap = counts[0], counts[1], counts[2]
     extra = 0
     for i in range(rows.shape[0]):  # first, without changing anything: is there room?
@@ -485,8 +556,9 @@ def learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
         offset[a, row] = base
         learned = row_sum[a, row] * factor + lr * tau[i] * gamma_sum
         row_sum[a, row] = learned
-        learned_scale[a, row], pad_scale[a, row] = _row_scales(log_pad[a, row],
-                                                               log_level[a, row], base, learned)
+        learned_scale[a, row], pad_scale[a, row] = _row_scales(
+            log_pad[a, row], log_level[a, row], base, learned
+        )
         first, count = start[a, row], nnz[a, row]
         for s in range(first, first + count):
             pool_vals[s] *= factor
@@ -507,8 +579,7 @@ def learn(a: int, lr: float, rows: IntArray, tau: FloatArray, cols: IntArray,
 
 
 @njit(cache=True)
-def _row_needs(count: int, first: int, cols: IntArray, pool_cols: ColArray, slots: IntArray
-               ) -> int:
+def _row_needs(count: int, first: int, cols: IntArray, pool_cols: ColArray, slots: IntArray) -> int:
     """How many entries a row of ``count`` entries from ``first`` holds once ``cols`` are in
     it (``slots`` zeroed before and after, as in :func:`_learn`)."""
     for s in range(first, first + count):
@@ -523,8 +594,15 @@ def _row_needs(count: int, first: int, cols: IntArray, pool_cols: ColArray, slot
 
 
 @njit(cache=True)
-def _compact(start: IntArray, cap: IntArray, nnz: IntArray, pool_cols: ColArray,
-             pool_vals: FloatArray, new_cols: ColArray, new_vals: FloatArray) -> int:
+def _compact(
+    start: IntArray,
+    cap: IntArray,
+    nnz: IntArray,
+    pool_cols: ColArray,
+    pool_vals: FloatArray,
+    new_cols: ColArray,
+    new_vals: FloatArray,
+) -> int:
     """Copy every row (actions x states) into the new pool, in order, each keeping its room;
     ``start`` is updated. Returns the slots in use."""
     used = 0
@@ -540,8 +618,15 @@ def _compact(start: IntArray, cap: IntArray, nnz: IntArray, pool_cols: ColArray,
 
 
 @njit(cache=True)
-def _add_learned(rows: IntArray, weights: FloatArray, start: IntArray, nnz: IntArray,
-                 pool_cols: ColArray, pool_vals: FloatArray, out: FloatArray) -> None:
+def _add_learned(
+    rows: IntArray,
+    weights: FloatArray,
+    start: IntArray,
+    nnz: IntArray,
+    pool_cols: ColArray,
+    pool_vals: FloatArray,
+    out: FloatArray,
+) -> None:
     """``out[j] += weight_i * vals(i, j)`` over the rows, in row and slot order (the order of
     a weighted bincount of the rows' entries laid side by side)."""
     for i in range(rows.shape[0]):
@@ -551,8 +636,14 @@ def _add_learned(rows: IntArray, weights: FloatArray, start: IntArray, nnz: IntA
 
 
 @njit(cache=True)
-def _dot_rows(p: FloatArray, start: IntArray, nnz: IntArray, pool_cols: ColArray,
-              pool_vals: FloatArray, out: FloatArray) -> None:
+def _dot_rows(
+    p: FloatArray,
+    start: IntArray,
+    nnz: IntArray,
+    pool_cols: ColArray,
+    pool_vals: FloatArray,
+    out: FloatArray,
+) -> None:
     """``out[i] = sum_s vals(i, s) p[cols(i, s)]`` for every row, summed in numpy's order."""
     widest = 0
     for i in range(out.shape[0]):

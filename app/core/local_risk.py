@@ -74,9 +74,19 @@ class LocalRisk:
     in a ring of ``horizon + 1`` rows of arrays, each the step's belief (states, padded with
     -1 and weight 0 up to ``belief_size``) and its ``phi``."""
 
-    def __init__(self, dim: int, n_criteria: int, n_bins: int, horizon: int,
-                 max_states: int, belief_size: int, max_streams: int, reach_horizon: int = 0,
-                 reach_radius: float = 0.05, bounds: FloatArray | None = None) -> None:
+    def __init__(
+        self,
+        dim: int,
+        n_criteria: int,
+        n_bins: int,
+        horizon: int,
+        max_states: int,
+        belief_size: int,
+        max_streams: int,
+        reach_horizon: int = 0,
+        reach_radius: float = 0.05,
+        bounds: FloatArray | None = None,
+    ) -> None:
         self.dim, self.n_criteria, self.n_bins = dim, n_criteria, n_bins
         self.horizon, self.max_states, self.belief_size = horizon, max_states, belief_size
         self.max_streams = max_streams
@@ -151,29 +161,60 @@ class LocalRisk:
         self._queue_ends = ensure_capacity(self._queue_ends, slot + 1, limit)
         self._arrays = None
 
-    def learn(self, slot: int, belief: Belief, z: FloatArray, action_bin: int,
-              failure: int | None, ended: bool) -> None:
+    def learn(
+        self,
+        slot: int,
+        belief: Belief,
+        z: FloatArray,
+        action_bin: int,
+        failure: int | None,
+        ended: bool,
+    ) -> None:
         """The previous step of the stream in ``slot`` (``belief`` and ``z`` before it,
         ``action_bin`` applied) ended in ``failure`` (a criterion index) or not; ``ended``
         closes its episode. One compiled call."""
         self.reserve(slot)
-        learn_step(self._theta, self._cov, self._tried, self._low, self._high, self._extent,
-                   self.midpoints, self._queue_index, self._queue_prob, self._queue_phi,
-                   self._queue_ends, self.failures, slot, belief.index, belief.prob, z, action_bin,
-                   -1 if failure is None else failure, ended, self.horizon)
+        learn_step(
+            self._theta,
+            self._cov,
+            self._tried,
+            self._low,
+            self._high,
+            self._extent,
+            self.midpoints,
+            self._queue_index,
+            self._queue_prob,
+            self._queue_phi,
+            self._queue_ends,
+            self.failures,
+            slot,
+            belief.index,
+            belief.prob,
+            z,
+            action_bin,
+            -1 if failure is None else failure,
+            ended,
+            self.horizon,
+        )
 
-    def learn_motion(self, belief: Belief, before: FloatArray, action_bin: int,
-                     after: FloatArray, failure: int | None) -> None:
+    def learn_motion(
+        self,
+        belief: Belief,
+        before: FloatArray,
+        action_bin: int,
+        after: FloatArray,
+        failure: int | None,
+    ) -> None:
         """A step of the reach (:mod:`app.core.reach`): the dynamics of the belief's states
         from ``before`` under ``action_bin`` to ``after``, and ``after`` kept as a failure
         point of criterion ``failure``, if one. What a shield's step learns in its compiled
         call, for a model built by hand."""
         phi = np.array([1.0, *before, self.midpoints[action_bin]])
-        reach.learn(self._dynamics, self._dynamics_cov, self._peak, belief.index,
-                    belief.prob, phi, after)
+        reach.learn(
+            self._dynamics, self._dynamics_cov, self._peak, belief.index, belief.prob, phi, after
+        )
         if failure is not None:
-            reach.add_failure(self._points, self._point_counts, failure, after,
-                              self.reach_radius)
+            reach.add_failure(self._points, self._point_counts, failure, after, self.reach_radius)
 
     def arrays(self) -> tuple[Any, ...]:
         """What a compiled step learns and decides with (:func:`learn_step`'s arrays, in
@@ -181,11 +222,26 @@ class LocalRisk:
         the failure points, their counts and the bounds): the same tuple until a state is
         added or a new slot reserved."""
         if self._arrays is None:
-            self._arrays = (self._theta, self._cov, self._tried, self._low, self._high,
-                            self._extent, self.midpoints, self._queue_index, self._queue_prob,
-                            self._queue_phi, self._queue_ends, self.failures,
-                            self._dynamics, self._dynamics_cov, self._peak, self._points,
-                            self._point_counts, self.bounds)
+            self._arrays = (
+                self._theta,
+                self._cov,
+                self._tried,
+                self._low,
+                self._high,
+                self._extent,
+                self.midpoints,
+                self._queue_index,
+                self._queue_prob,
+                self._queue_phi,
+                self._queue_ends,
+                self.failures,
+                self._dynamics,
+                self._dynamics_cov,
+                self._peak,
+                self._points,
+                self._point_counts,
+                self.bounds,
+            )
         return self._arrays
 
     def pending(self, slot: int) -> int:
@@ -212,21 +268,58 @@ class LocalRisk:
         bins as their nearest tried bin on the safe side (``safe`` per criterion from
         :func:`app.core.risk.safe_steps`), none for the bins safer than every bin applied
         near ``z``, before the monotone prior."""
-        _read(self._theta, self._tried, self._low, self._high, belief.index, belief.prob, z,
-              self.midpoints, safe, out)
+        _read(
+            self._theta,
+            self._tried,
+            self._low,
+            self._high,
+            belief.index,
+            belief.prob,
+            z,
+            self.midpoints,
+            safe,
+            out,
+        )
 
-    def decide(self, belief: Belief, z: FloatArray, proposed_bin: int, threshold: float,
-               margin: float, safe: IntArray, by_bin: FloatArray, verdicts: IntArray
-               ) -> tuple[float, int, int, bool]:
+    def decide(
+        self,
+        belief: Belief,
+        z: FloatArray,
+        proposed_bin: int,
+        threshold: float,
+        margin: float,
+        safe: IntArray,
+        by_bin: FloatArray,
+        verdicts: IntArray,
+    ) -> tuple[float, int, int, bool]:
         """The risk reviser's decision on a proposal at ``z``
         (:func:`app.core.risk.decide`): ``by_bin`` gets each action's risk per criterion, the
         blend of the local model's (:meth:`read`) and the reach's, each under the monotone
         prior, and ``verdicts`` each bin's verdict; one compiled call."""
-        return decide_step(self._theta, self._tried, self._low, self._high, belief.index,
-                           belief.prob, z, self.midpoints, safe, proposed_bin, threshold,
-                           margin, by_bin, verdicts, self._dynamics, self._peak,
-                           self._extent, self._points, self._point_counts, self.bounds,
-                           self.reach_horizon, self.reach_radius)
+        return decide_step(
+            self._theta,
+            self._tried,
+            self._low,
+            self._high,
+            belief.index,
+            belief.prob,
+            z,
+            self.midpoints,
+            safe,
+            proposed_bin,
+            threshold,
+            margin,
+            by_bin,
+            verdicts,
+            self._dynamics,
+            self._peak,
+            self._extent,
+            self._points,
+            self._point_counts,
+            self.bounds,
+            self.reach_horizon,
+            self.reach_radius,
+        )
 
     def snapshot(self, slots: Mapping[str, int]) -> dict[str, Any]:
         """Exact state as arrays: the weights, their covariances, the bins' boxes, the
@@ -247,18 +340,24 @@ class LocalRisk:
                 index.append(self._queue_index[slot, row, :size])
                 prob.append(self._queue_prob[slot, row, :size])
                 phi.append(self._queue_phi[slot, row])
-        return {"theta": self.theta.copy(), "cov": self._cov[: self._n].copy(),
-                "tried": self.tried.copy(), **self._boxes(),
-                "failures": self.failures.copy(), "dynamics": self._dynamics[: self._n].copy(),
-                "dynamics_cov": self._dynamics_cov[: self._n].copy(),
-                "peak": self._peak.copy(),
-                "points": self._points.copy(), "point_counts": self._point_counts.copy(),
-                "streams": names,
-                "lengths": np.array(lengths, dtype=np.int64),
-                "sizes": np.array(sizes, dtype=np.int64),
-                "index": np.concatenate(index) if index else np.zeros(0, dtype=np.int64),
-                "prob": np.concatenate(prob) if prob else np.zeros(0),
-                "phi": np.array(phi).reshape(-1, self.size)}
+        return {
+            "theta": self.theta.copy(),
+            "cov": self._cov[: self._n].copy(),
+            "tried": self.tried.copy(),
+            **self._boxes(),
+            "failures": self.failures.copy(),
+            "dynamics": self._dynamics[: self._n].copy(),
+            "dynamics_cov": self._dynamics_cov[: self._n].copy(),
+            "peak": self._peak.copy(),
+            "points": self._points.copy(),
+            "point_counts": self._point_counts.copy(),
+            "streams": names,
+            "lengths": np.array(lengths, dtype=np.int64),
+            "sizes": np.array(sizes, dtype=np.int64),
+            "index": np.concatenate(index) if index else np.zeros(0, dtype=np.int64),
+            "prob": np.concatenate(prob) if prob else np.zeros(0),
+            "phi": np.array(phi).reshape(-1, self.size),
+        }
 
     def _boxes(self) -> dict[str, FloatArray]:
         """The boxes, finite: an empty one (never applied) as low 1, high 0."""
@@ -267,18 +366,29 @@ class LocalRisk:
         return {"low": np.where(empty, 1.0, low), "high": np.where(empty, 0.0, high)}
 
     @classmethod
-    def restore(cls, shape: LocalRisk, n_states: int, slots: Mapping[str, int],
-                data: dict[str, Any]) -> LocalRisk:
+    def restore(
+        cls, shape: LocalRisk, n_states: int, slots: Mapping[str, int], data: dict[str, Any]
+    ) -> LocalRisk:
         """Rebuild from :meth:`snapshot` output into a model of ``shape``'s sizes (an empty
         one), checking every part; ``slots`` gives each stream of the model its slot."""
-        self = cls(shape.dim, shape.n_criteria, shape.n_bins, shape.horizon,
-                   shape.max_states, shape.belief_size, shape.max_streams,
-                   shape.reach_horizon, shape.reach_radius, shape.bounds)
+        self = cls(
+            shape.dim,
+            shape.n_criteria,
+            shape.n_bins,
+            shape.horizon,
+            shape.max_states,
+            shape.belief_size,
+            shape.max_streams,
+            shape.reach_horizon,
+            shape.reach_radius,
+            shape.bounds,
+        )
         dim, n_criteria, n_bins, m = self.dim, self.n_criteria, self.n_bins, self.size
         theta = stored.floats(data["theta"], "local_risk.theta", (n_states, n_criteria, m))
         # the covariance only shrinks from PRIOR_COV * I as steps are fitted
-        cov = stored.floats(data["cov"], "local_risk.cov", (n_states, m, m), low=-PRIOR_COV,
-                            high=PRIOR_COV)
+        cov = stored.floats(
+            data["cov"], "local_risk.cov", (n_states, m, m), low=-PRIOR_COV, high=PRIOR_COV
+        )
         tried = stored.ints(data["tried"], "local_risk.tried", (n_states, n_bins), low=0)
         self._theta, self._cov, self._n = theta.copy(), cov.copy(), n_states
         self._tried = tried.copy()
@@ -289,9 +399,11 @@ class LocalRisk:
             high = stored.floats(data.get("high"), "local_risk.high", self._low.shape)
             empty = (low > high).all(axis=-1)
             if ((low > high).any(axis=-1) & ~empty).any():
-                raise InvalidSnapshot("a box whose low end lies above its high end in some "
-                                      "dimensions only (empty boxes: in all)",
-                                      field="local_risk.low")
+                raise InvalidSnapshot(
+                    "a box whose low end lies above its high end in some "
+                    "dimensions only (empty boxes: in all)",
+                    field="local_risk.low",
+                )
             self._low[~empty], self._high[~empty] = low[~empty], high[~empty]
             if (~empty).any():
                 self._extent[0] = low[~empty].min(axis=0)
@@ -311,42 +423,53 @@ class LocalRisk:
         self._dynamics_cov[:] = np.eye(m) * PRIOR_COV
         self._peak = np.zeros(self.dim)
         if "peak" in data:
-            self._peak = stored.floats(data["peak"], "local_risk.peak", (self.dim,),
-                                       low=0.0).copy()
+            self._peak = stored.floats(data["peak"], "local_risk.peak", (self.dim,), low=0.0).copy()
         if "dynamics" not in data:
             return
         self._dynamics = stored.floats(data["dynamics"], "local_risk.dynamics", shape).copy()
-        self._dynamics_cov = stored.floats(data["dynamics_cov"], "local_risk.dynamics_cov",
-                                           (n_states, m, m), low=-PRIOR_COV,
-                                           high=PRIOR_COV).copy()
-        self._points = stored.floats(data["points"], "local_risk.points",
-                                     self._points.shape).copy()
+        self._dynamics_cov = stored.floats(
+            data["dynamics_cov"],
+            "local_risk.dynamics_cov",
+            (n_states, m, m),
+            low=-PRIOR_COV,
+            high=PRIOR_COV,
+        ).copy()
+        self._points = stored.floats(data["points"], "local_risk.points", self._points.shape).copy()
         limit = reach.MAX_POINTS
-        counts = stored.ints(data["point_counts"], "local_risk.point_counts",
-                             (self.n_criteria, 2), low=0, high=limit)
+        counts = stored.ints(
+            data["point_counts"], "local_risk.point_counts", (self.n_criteria, 2), low=0, high=limit
+        )
         kept, slot = counts[:, 0], counts[:, 1]
         if (slot >= limit).any() or ((kept < limit) & (slot != kept)).any():
-            raise InvalidSnapshot("a failure point's next slot lies beyond those kept",
-                                  field="local_risk.point_counts")
+            raise InvalidSnapshot(
+                "a failure point's next slot lies beyond those kept",
+                field="local_risk.point_counts",
+            )
         self._point_counts = counts.copy()
 
-    def _restore_pending(self, n_states: int, slots: Mapping[str, int],
-                         data: dict[str, Any]) -> None:
+    def _restore_pending(
+        self, n_states: int, slots: Mapping[str, int], data: dict[str, Any]
+    ) -> None:
         if slots:
             self.reserve(max(slots.values()))
         names = data["streams"]
         if not isinstance(names, list) or not all(isinstance(s, str) for s in names):
             raise InvalidSnapshot("pending streams must be names", field="local_risk.streams")
         if len(set(names)) != len(names) or not set(names) <= set(slots):
-            raise InvalidSnapshot("pending steps name each of the model's streams at most once",
-                                  field="local_risk.streams")
-        lengths = stored.ints(data["lengths"], "local_risk.lengths", (len(names),), low=1,
-                              high=self.horizon + 1)
+            raise InvalidSnapshot(
+                "pending steps name each of the model's streams at most once",
+                field="local_risk.streams",
+            )
+        lengths = stored.ints(
+            data["lengths"], "local_risk.lengths", (len(names),), low=1, high=self.horizon + 1
+        )
         steps = int(lengths.sum())
-        sizes = stored.ints(data["sizes"], "local_risk.sizes", (steps,), low=1,
-                            high=self.belief_size)
-        index = stored.ints(data["index"], "local_risk.index", (int(sizes.sum()),), low=0,
-                            high=max(n_states - 1, 0))
+        sizes = stored.ints(
+            data["sizes"], "local_risk.sizes", (steps,), low=1, high=self.belief_size
+        )
+        index = stored.ints(
+            data["index"], "local_risk.index", (int(sizes.sum()),), low=0, high=max(n_states - 1, 0)
+        )
         prob = stored.floats(data["prob"], "local_risk.prob", index.shape, low=0.0, high=1.0)
         phi = stored.floats(data["phi"], "local_risk.phi", (steps, self.size))
         at = row = 0
@@ -356,19 +479,36 @@ class LocalRisk:
             for j in range(length):
                 size = int(sizes[row])
                 self._queue_index[slot, j] = -1
-                self._queue_index[slot, j, :size] = index[at:at + size]
+                self._queue_index[slot, j, :size] = index[at : at + size]
                 self._queue_prob[slot, j] = 0.0
-                self._queue_prob[slot, j, :size] = prob[at:at + size]
+                self._queue_prob[slot, j, :size] = prob[at : at + size]
                 self._queue_phi[slot, j] = phi[row]
                 at, row = at + size, row + 1
 
 
 @njit(cache=True)
-def learn_step(theta: FloatArray, cov: FloatArray, tried: IntArray, low: FloatArray,
-           high: FloatArray, extent: FloatArray, midpoints: FloatArray, queue_index: IntArray,
-           queue_prob: FloatArray, queue_phi: FloatArray, queue_ends: IntArray,
-           failures: IntArray, slot: int, index: IntArray, prob: FloatArray, z: FloatArray,
-           action_bin: int, failure: int, ended: bool, horizon: int) -> None:
+def learn_step(
+    theta: FloatArray,
+    cov: FloatArray,
+    tried: IntArray,
+    low: FloatArray,
+    high: FloatArray,
+    extent: FloatArray,
+    midpoints: FloatArray,
+    queue_index: IntArray,
+    queue_prob: FloatArray,
+    queue_phi: FloatArray,
+    queue_ends: IntArray,
+    failures: IntArray,
+    slot: int,
+    index: IntArray,
+    prob: FloatArray,
+    z: FloatArray,
+    action_bin: int,
+    failure: int,
+    ended: bool,
+    horizon: int,
+) -> None:
     """:meth:`LocalRisk.learn` (``failure`` -1: none): count the step in the belief's most
     likely state (the lowest index of equals) and widen that bin's box there to hold ``z``,
     queue it with its ``phi(z, u) = [1, z, u]``, then fit the steps whose labels are known:
@@ -397,8 +537,14 @@ def learn_step(theta: FloatArray, cov: FloatArray, tried: IntArray, low: FloatAr
     labels = np.zeros(failures.shape[0])
     if failure < 0 and not ended:
         if length > horizon:  # old enough: no failure followed within it
-            _fit(theta, cov, queue_index[slot, first], queue_prob[slot, first],
-                 queue_phi[slot, first], labels)
+            _fit(
+                theta,
+                cov,
+                queue_index[slot, first],
+                queue_prob[slot, first],
+                queue_phi[slot, first],
+                labels,
+            )
             first, length = (first + 1) % ring, length - 1
         queue_ends[slot, 0], queue_ends[slot, 1] = first, length
         return
@@ -407,14 +553,21 @@ def learn_step(theta: FloatArray, cov: FloatArray, tried: IntArray, low: FloatAr
         failures[failure] += 1
     for j in range(length):
         row = (first + j) % ring
-        _fit(theta, cov, queue_index[slot, row], queue_prob[slot, row], queue_phi[slot, row],
-             labels)
+        _fit(
+            theta, cov, queue_index[slot, row], queue_prob[slot, row], queue_phi[slot, row], labels
+        )
     queue_ends[slot, 0], queue_ends[slot, 1] = 0, 0
 
 
 @njit(cache=True)
-def _fit(theta: FloatArray, cov: FloatArray, index: IntArray, prob: FloatArray,
-         phi: FloatArray, labels: FloatArray) -> None:
+def _fit(
+    theta: FloatArray,
+    cov: FloatArray,
+    index: IntArray,
+    prob: FloatArray,
+    phi: FloatArray,
+    labels: FloatArray,
+) -> None:
     """One labelled step into each belief state's weights: weighted recursive least squares
     with weight ``prob`` (the state's membership), every criterion sharing the covariance.
     Entries of weight below ``MIN_WEIGHT`` (the queue's padding among them) change nothing."""
@@ -431,9 +584,18 @@ def _near(low: FloatArray, high: FloatArray, i: int, a: int, z: FloatArray) -> b
 
 
 @njit(cache=True)
-def _read(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
-          index: IntArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
-          safe: IntArray, out: FloatArray) -> None:
+def _read(
+    theta: FloatArray,
+    tried: IntArray,
+    low: FloatArray,
+    high: FloatArray,
+    index: IntArray,
+    prob: FloatArray,
+    z: FloatArray,
+    midpoints: FloatArray,
+    safe: IntArray,
+    out: FloatArray,
+) -> None:
     """Each action's risk per criterion under the belief, clipped to [0, 1]: per belief state,
     none on the bins safer than every bin applied near ``z``, then its model on the bins
     tried in the state and the nearest tried bin on the safe side (or none) on the others."""
@@ -464,8 +626,16 @@ def _read(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
 
 
 @njit(cache=True)
-def _read_undirected(theta: FloatArray, tried: IntArray, i: int, c: int, base: float,
-                     midpoints: FloatArray, weight: float, out: FloatArray) -> None:
+def _read_undirected(
+    theta: FloatArray,
+    tried: IntArray,
+    i: int,
+    c: int,
+    base: float,
+    midpoints: FloatArray,
+    weight: float,
+    out: FloatArray,
+) -> None:
     """A criterion without a direction in state ``i``: its model on the bins tried there, the
     nearest tried bin's risk on the others (the riskier of two equally near), none where no
     bin was tried; added to ``out`` with ``weight``."""
@@ -482,13 +652,30 @@ def _read_undirected(theta: FloatArray, tried: IntArray, i: int, c: int, base: f
 
 
 @njit(cache=True)
-def decide_step(theta: FloatArray, tried: IntArray, low: FloatArray, high: FloatArray,
-                index: IntArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
-                safe: IntArray, proposed_bin: int, threshold: float, margin: float,
-                by_bin: FloatArray, verdicts: IntArray, dynamics: FloatArray,
-                peak: FloatArray, extent: FloatArray, points: FloatArray,
-                point_counts: IntArray, bounds: FloatArray, reach_horizon: int,
-                reach_radius: float) -> tuple[float, int, int, bool]:
+def decide_step(
+    theta: FloatArray,
+    tried: IntArray,
+    low: FloatArray,
+    high: FloatArray,
+    index: IntArray,
+    prob: FloatArray,
+    z: FloatArray,
+    midpoints: FloatArray,
+    safe: IntArray,
+    proposed_bin: int,
+    threshold: float,
+    margin: float,
+    by_bin: FloatArray,
+    verdicts: IntArray,
+    dynamics: FloatArray,
+    peak: FloatArray,
+    extent: FloatArray,
+    points: FloatArray,
+    point_counts: IntArray,
+    bounds: FloatArray,
+    reach_horizon: int,
+    reach_radius: float,
+) -> tuple[float, int, int, bool]:
     """:meth:`LocalRisk.decide` on its arrays: :func:`_read` and the reach
     (:func:`app.core.reach.risk`), each under the monotone prior, and the decision on both
     (:func:`app.core.risk.decide`)."""
@@ -496,8 +683,23 @@ def decide_step(theta: FloatArray, tried: IntArray, low: FloatArray, high: Float
     risk.monotone(by_bin, safe)
     reached = np.zeros(by_bin.shape)
     if reach_horizon > 0:
-        reach.risk(dynamics, peak, extent, index, prob, z, midpoints, safe, points,
-                   point_counts, bounds, reach_horizon, reach_radius, reached)
+        reach.risk(
+            dynamics,
+            peak,
+            extent,
+            index,
+            prob,
+            z,
+            midpoints,
+            safe,
+            points,
+            point_counts,
+            bounds,
+            reach_horizon,
+            reach_radius,
+            reached,
+        )
         risk.monotone(reached, safe)
-    return risk.decide(by_bin, reached, reach_horizon > 0, proposed_bin, threshold, margin,
-                       verdicts)
+    return risk.decide(
+        by_bin, reached, reach_horizon > 0, proposed_bin, threshold, margin, verdicts
+    )

@@ -31,8 +31,19 @@ class ObservationSpace:
         self._feature_range = np.array([f.high - f.low for f in features], dtype=np.float64)
         # per feature: weights (dim), divide_by (dim), whether a ratio, floor, low, range
         self.features = np.array(
-            [[*f.weights, *(f.divide_by or (0.0,) * dim), bool(f.divide_by), f.floor, f.low,
-              f.high - f.low] for f in features], dtype=np.float64).reshape(-1, 2 * dim + 4)
+            [
+                [
+                    *f.weights,
+                    *(f.divide_by or (0.0,) * dim),
+                    bool(f.divide_by),
+                    f.floor,
+                    f.low,
+                    f.high - f.low,
+                ]
+                for f in features
+            ],
+            dtype=np.float64,
+        ).reshape(-1, 2 * dim + 4)
         knee = np.array(spec.knee or [0.0] * dim, dtype=np.float64)
         self._curved: BoolArray = knee > 0  # the dimensions with a knee
         self._knee = np.where(self._curved, knee, 1.0)
@@ -40,8 +51,9 @@ class ObservationSpace:
         self._low = low + np.where(self._curved, np.clip(low, -self._knee, self._knee), 0.0)
         self._range: FloatArray = high - low
         # per dimension: whether it has a knee, the knee, the (warped) low end, the range
-        self.scales = np.stack([self._curved.astype(np.float64), self._knee, self._low,
-                                self._range])
+        self.scales = np.stack(
+            [self._curved.astype(np.float64), self._knee, self._low, self._range]
+        )
 
     def normalise(self, observation: FloatArray) -> FloatArray:
         """Physical units (a float64 vector) to the clustering space."""
@@ -73,8 +85,9 @@ class ObservationSpace:
 
 
 @njit(cache=True)
-def normalise(x: FloatArray, raw: bool, scales: FloatArray, features: FloatArray,
-              out: FloatArray) -> None:
+def normalise(
+    x: FloatArray, raw: bool, scales: FloatArray, features: FloatArray, out: FloatArray
+) -> None:
     """:meth:`ObservationSpace.normalise` into ``out``, on its packed ``scales`` and
     ``features``."""
     at, d = 0, x.shape[0]

@@ -74,8 +74,15 @@ def no_bounds(n_criteria: int) -> FloatArray:
 
 
 @njit(cache=True)
-def learn(dynamics: FloatArray, cov: FloatArray, peak: FloatArray, index: IntArray,
-          prob: FloatArray, phi: FloatArray, z: FloatArray) -> None:
+def learn(
+    dynamics: FloatArray,
+    cov: FloatArray,
+    peak: FloatArray,
+    index: IntArray,
+    prob: FloatArray,
+    phi: FloatArray,
+    z: FloatArray,
+) -> None:
     """One transition into the dynamics of the states of the belief it left from (``index``,
     ``prob``; ``phi = [1, z_before, u]``, ``z`` after): the peak one-step error per dimension
     (``peak``) takes the error of the most likely state's dynamics when they are learned
@@ -96,8 +103,9 @@ def learn(dynamics: FloatArray, cov: FloatArray, peak: FloatArray, index: IntArr
 
 
 @njit(cache=True)
-def add_failure(points: FloatArray, counts: IntArray, criterion: int, z: FloatArray,
-                radius: float) -> None:
+def add_failure(
+    points: FloatArray, counts: IntArray, criterion: int, z: FloatArray, radius: float
+) -> None:
     """Keep ``z`` among ``criterion``'s failure observations, unless a kept one lies within
     half the radius; once full, the oldest kept is replaced (``counts`` holds, per criterion,
     the points kept and the next slot to write)."""
@@ -117,9 +125,18 @@ def add_failure(points: FloatArray, counts: IntArray, criterion: int, z: FloatAr
 
 
 @njit(cache=True)
-def _closest(points: FloatArray, kept: int, c: int, p: FloatArray, v: FloatArray,
-             u_low: float, u_high: float, radius: float, midpoints: FloatArray,
-             nearest: FloatArray) -> None:
+def _closest(
+    points: FloatArray,
+    kept: int,
+    c: int,
+    p: FloatArray,
+    v: FloatArray,
+    u_low: float,
+    u_high: float,
+    radius: float,
+    midpoints: FloatArray,
+    nearest: FloatArray,
+) -> None:
     """``nearest[a]``: the least squared distance from ``p + v u_a`` to criterion c's
     failure points, counting only the points within ``radius`` of the path's segment (u in
     ``[u_low, u_high]``; others stay at their value)."""
@@ -144,10 +161,22 @@ def _closest(points: FloatArray, kept: int, c: int, p: FloatArray, v: FloatArray
 
 
 @njit(cache=True)
-def risk(dynamics: FloatArray, peak: FloatArray, extent: FloatArray, index: IntArray,
-         prob: FloatArray, z: FloatArray, midpoints: FloatArray, safe: IntArray,
-         points: FloatArray, counts: IntArray, bounds: FloatArray, horizon: int,
-         radius: float, out: FloatArray) -> None:
+def risk(
+    dynamics: FloatArray,
+    peak: FloatArray,
+    extent: FloatArray,
+    index: IntArray,
+    prob: FloatArray,
+    z: FloatArray,
+    midpoints: FloatArray,
+    safe: IntArray,
+    points: FloatArray,
+    counts: IntArray,
+    bounds: FloatArray,
+    horizon: int,
+    radius: float,
+    out: FloatArray,
+) -> None:
     """``out`` (bins x criteria): each action's reach risk at ``z`` under the belief
     (``index``, ``prob``), see the module docstring: the larger of its closeness to the
     failure points and, for a criterion with a bound (``bounds``, :func:`no_bounds`), how
@@ -169,8 +198,19 @@ def risk(dynamics: FloatArray, peak: FloatArray, extent: FloatArray, index: IntA
         # the continuation: the safe end of the range, or its middle without a direction
         u_safe = (u_low if safe[c] < 0 else u_high) if safe[c] != 0 else 0.5 * (u_low + u_high)
         if b >= 0:
-            crossings(model, peak, extent, z, midpoints, u_safe, b, bounds[c, 1], bounds[c, 2],
-                      horizon, when)
+            crossings(
+                model,
+                peak,
+                extent,
+                z,
+                midpoints,
+                u_safe,
+                b,
+                bounds[c, 1],
+                bounds[c, 2],
+                horizon,
+                when,
+            )
             # a bound tells the actions apart and adds no risk that every action shares: the
             # latest crossing counts as none
             latest = when.max()
@@ -219,9 +259,19 @@ def risk(dynamics: FloatArray, peak: FloatArray, extent: FloatArray, index: IntA
 
 
 @njit(cache=True)
-def crossings(model: FloatArray, peak: FloatArray, extent: FloatArray, z: FloatArray,
-              midpoints: FloatArray, u_safe: float, b: int, below: float, above: float,
-              horizon: int, when: FloatArray) -> None:
+def crossings(
+    model: FloatArray,
+    peak: FloatArray,
+    extent: FloatArray,
+    z: FloatArray,
+    midpoints: FloatArray,
+    u_safe: float,
+    b: int,
+    below: float,
+    above: float,
+    horizon: int,
+    when: FloatArray,
+) -> None:
     """``when[a]``: when the box of the worst cases of bin a reaches ``below`` or ``above``
     on dimension ``b``, in steps from ``z`` (interpolated within the step; 0 when ``z`` is
     there already, ``horizon + 1`` when the box does not get there in ``horizon`` steps). Each

@@ -95,8 +95,16 @@ class Record:
         row = self.counts[state]
         if row[REVISED_FAILURES] < MIN_FAILURES:
             return False
-        return excess(int(row[REVISED]), int(row[REVISED_FAILED]), int(row[PASSED]),
-                      int(row[PASSED_FAILED]), self.window) > Z
+        return (
+            excess(
+                int(row[REVISED]),
+                int(row[REVISED_FAILED]),
+                int(row[PASSED]),
+                int(row[PASSED_FAILED]),
+                self.window,
+            )
+            > Z
+        )
 
     def backed_off(self) -> npt.NDArray[np.bool_]:
         """Per state, whether the shield backs off there now."""
@@ -107,51 +115,70 @@ class Record:
         then states and whether revised, concatenated)."""
         names = [name for name, pending in self._pending.items() if pending]
         steps = [step for name in names for step in self._pending[name]]
-        return {"counts": self.counts.copy(), "streams": names,
-                "lengths": np.array([len(self._pending[n]) for n in names], dtype=np.int64),
-                "states": np.array([s for s, _ in steps], dtype=np.int64),
-                "revised": np.array([r for _, r in steps], dtype=np.int64)}
+        return {
+            "counts": self.counts.copy(),
+            "streams": names,
+            "lengths": np.array([len(self._pending[n]) for n in names], dtype=np.int64),
+            "states": np.array([s for s, _ in steps], dtype=np.int64),
+            "revised": np.array([r for _, r in steps], dtype=np.int64),
+        }
 
     @classmethod
-    def restore(cls, window: int, n_states: int, streams: Mapping[str, object],
-                data: dict[str, Any] | None) -> Record:
+    def restore(
+        cls, window: int, n_states: int, streams: Mapping[str, object], data: dict[str, Any] | None
+    ) -> Record:
         """Rebuild from :meth:`snapshot` output, checking every part (None, a snapshot from
         before the record: nothing counted); ``streams`` are the model's streams."""
         self = cls(window)
         self.counts = np.zeros((n_states, len(COLUMNS)), dtype=np.int64)
         if data is None:
             return self
-        counts = stored.ints(data["counts"], "record.counts", (n_states, len(COLUMNS)),
-                             low=0, high=stored.MAX_COUNT)
-        if ((counts[:, REVISED_FAILED] > counts[:, REVISED])
-                | (counts[:, PASSED_FAILED] > counts[:, PASSED])
-                | (counts[:, REVISED_FAILURES] > counts[:, REVISED_FAILED])).any():
-            raise InvalidSnapshot("more failed steps than steps in a state's record",
-                                  field="record.counts")
+        counts = stored.ints(
+            data["counts"], "record.counts", (n_states, len(COLUMNS)), low=0, high=stored.MAX_COUNT
+        )
+        if (
+            (counts[:, REVISED_FAILED] > counts[:, REVISED])
+            | (counts[:, PASSED_FAILED] > counts[:, PASSED])
+            | (counts[:, REVISED_FAILURES] > counts[:, REVISED_FAILED])
+        ).any():
+            raise InvalidSnapshot(
+                "more failed steps than steps in a state's record", field="record.counts"
+            )
         names = data["streams"]
-        if (not isinstance(names, list) or not all(isinstance(s, str) for s in names)
-                or len(set(names)) != len(names) or not set(names) <= set(streams)):
-            raise InvalidSnapshot("pending steps name each of the model's streams at most once",
-                                  field="record.streams")
-        lengths = stored.ints(data["lengths"], "record.lengths", (len(names),), low=1,
-                              high=window)
+        if (
+            not isinstance(names, list)
+            or not all(isinstance(s, str) for s in names)
+            or len(set(names)) != len(names)
+            or not set(names) <= set(streams)
+        ):
+            raise InvalidSnapshot(
+                "pending steps name each of the model's streams at most once",
+                field="record.streams",
+            )
+        lengths = stored.ints(data["lengths"], "record.lengths", (len(names),), low=1, high=window)
         total = int(lengths.sum())
-        states = stored.ints(data["states"], "record.states", (total,), low=0,
-                             high=max(n_states - 1, 0))
+        states = stored.ints(
+            data["states"], "record.states", (total,), low=0, high=max(n_states - 1, 0)
+        )
         revised = stored.ints(data["revised"], "record.revised", (total,), low=0, high=1)
         self.counts = counts.copy()
         at = 0
         for name, length in zip(names, lengths.tolist(), strict=True):
             self._pending[name] = deque(
-                (int(s), bool(r)) for s, r in zip(states[at:at + length].tolist(),
-                                                  revised[at:at + length].tolist(),
-                                                  strict=True))
+                (int(s), bool(r))
+                for s, r in zip(
+                    states[at : at + length].tolist(),
+                    revised[at : at + length].tolist(),
+                    strict=True,
+                )
+            )
             at += length
         return self
 
 
-def excess(revised: int, revised_failed: int, passed: int, passed_failed: int,
-           window: int) -> float:
+def excess(
+    revised: int, revised_failed: int, passed: int, passed_failed: int, window: int
+) -> float:
     """How many standard errors the failure rate after revisions exceeds the one after passed
     proposals (each rate with one failure and one success added, each count in samples of
     ``window`` steps, at least one)."""

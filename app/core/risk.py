@@ -93,8 +93,15 @@ def nearest_allowed(total: FloatArray, proposed_bin: int, limit: float) -> int:
 
 
 @njit(cache=True)
-def decide(by_bin: FloatArray, reached: FloatArray, use_reach: bool, proposed_bin: int,
-           threshold: float, margin: float, verdicts: IntArray) -> tuple[float, int, int, bool]:
+def decide(
+    by_bin: FloatArray,
+    reached: FloatArray,
+    use_reach: bool,
+    proposed_bin: int,
+    threshold: float,
+    margin: float,
+    verdicts: IntArray,
+) -> tuple[float, int, int, bool]:
     """One decision on the local model's risks (``by_bin``, actions x criteria) and the
     reach's (``reached``, the same shape), both after
     :func:`monotone`.

@@ -75,9 +75,15 @@ class RiskCandidates(Sequence[Candidate]):
     read them). ``bin_actions`` are the bins' actions and ``verdicts_named`` the criteria's
     names then ``"ok"``, so that a verdict (-1: ok) indexes its name."""
 
-    def __init__(self, bins: range, by_bin: FloatArray, verdicts: npt.NDArray[np.int64],
-                 names: Sequence[str], bin_actions: Sequence[float],
-                 verdicts_named: Sequence[str]) -> None:
+    def __init__(
+        self,
+        bins: range,
+        by_bin: FloatArray,
+        verdicts: npt.NDArray[np.int64],
+        names: Sequence[str],
+        bin_actions: Sequence[float],
+        verdicts_named: Sequence[str],
+    ) -> None:
         self._bins, self._by_bin, self._verdicts = bins, by_bin, verdicts
         self._names, self._actions, self._verdicts_named = names, bin_actions, verdicts_named
         self._built: tuple[Candidate, ...] | None = None
@@ -92,9 +98,15 @@ class RiskCandidates(Sequence[Candidate]):
         straight from the arrays: the service's per-step path."""
         names, rows, verdicts = self._names, self._by_bin.tolist(), self._verdicts.tolist()
         bin_actions, named = self._actions, self._verdicts_named
-        return [{"action": bin_actions[r], "bin": r, "verdict": named[verdicts[r]],
-                 "risk": {name: risk for name, risk in zip(names, rows[r], strict=True)}}
-                for r in self._bins]  # (a comprehension builds a small dict faster than dict())
+        return [
+            {
+                "action": bin_actions[r],
+                "bin": r,
+                "verdict": named[verdicts[r]],
+                "risk": {name: risk for name, risk in zip(names, rows[r], strict=True)},
+            }
+            for r in self._bins
+        ]  # (a comprehension builds a small dict faster than dict())
 
     def __iter__(self) -> Iterator[Candidate]:
         return iter(self._all())
@@ -143,16 +155,30 @@ class Decision:
     def to_dict(self) -> dict[str, Any]:
         """JSON-able data, written out by hand: this is on the service's per-step path."""
         return {
-            "action": self.action, "proposed": self.proposed, "revised": self.revised,
-            "reason": self.reason, "verdict": self.verdict, "risk": self.risk,
+            "action": self.action,
+            "proposed": self.proposed,
+            "revised": self.revised,
+            "reason": self.reason,
+            "verdict": self.verdict,
+            "risk": self.risk,
             "threshold": self.threshold,
             "candidates": (
-                self.candidates.records() if isinstance(self.candidates, RiskCandidates)
-                else [{"action": c.action, "bin": c.bin, "verdict": c.verdict, "risk": c.risk}
-                      for c in self.candidates]),
-            "state": self.state, "n_states": self.n_states, "new_state": self.new_state,
-            "episode": self.episode, "step": self.step, "model_version": self.model_version,
-            "stream": self.stream, "shadow": self.shadow, "suggested": self.suggested,
+                self.candidates.records()
+                if isinstance(self.candidates, RiskCandidates)
+                else [
+                    {"action": c.action, "bin": c.bin, "verdict": c.verdict, "risk": c.risk}
+                    for c in self.candidates
+                ]
+            ),
+            "state": self.state,
+            "n_states": self.n_states,
+            "new_state": self.new_state,
+            "episode": self.episode,
+            "step": self.step,
+            "model_version": self.model_version,
+            "stream": self.stream,
+            "shadow": self.shadow,
+            "suggested": self.suggested,
         }
 
     @classmethod
@@ -224,8 +250,11 @@ class Shield:
         # the risk reviser applies a bin at its midpoint, the end bins at the range's ends: a
         # criterion's safest action is the end of the range (not half a bin short of it)
         spec = cfg.action
-        self._bin_actions = [spec.low, *(actions.decode(r, spec) for r in
-                                         range(1, spec.n_bins - 1)), spec.high]
+        self._bin_actions = [
+            spec.low,
+            *(actions.decode(r, spec) for r in range(1, spec.n_bins - 1)),
+            spec.high,
+        ]
         # the reviser's decision on a proposal: the risk reviser's (the default) or the paper's
         self._by_risk = cfg.reviser.method == "risk"
         self._decide = self._decide_by_risk if self._by_risk else self._decide_by_flags
@@ -241,16 +270,19 @@ class Shield:
         cfg = self.config
         self.clusterer = EvolvingClusterer(cfg.clustering, self.space.size, cfg.limits.max_states)
         self.transitions: TransitionModel = self._new_transitions()
-        self.flags = StateFlags(cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria),
-                                cfg.reviser.flag_min_rate)
+        self.flags = StateFlags(
+            cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria), cfg.reviser.flag_min_rate
+        )
         self.local_risk = self._new_local_risk()
         self.record = Record(self._record_window())
         self.streams: dict[str, StreamState] = {}  # least recently stepped first
         self._free_slots: list[int] = []  # slots of streams that ended, reused first
         self._model_arrays: tuple[Any, ...] = ()  # see _arrays
         self._parts: tuple[Any, ...] = ()  # the parts' arrays it was gathered from
-        self.counters = Counters(interventions={c.name: 0 for c in cfg.criteria},
-                                 failures={c.name: 0 for c in cfg.criteria})
+        self.counters = Counters(
+            interventions={c.name: 0 for c in cfg.criteria},
+            failures={c.name: 0 for c in cfg.criteria},
+        )
         self.history = History(len(cfg.criteria))
         self._rng = np.random.default_rng(cfg.reviser.seed)
 
@@ -258,10 +290,18 @@ class Shield:
         cfg = self.config
         if cfg.reviser.method != "risk":
             return None
-        return LocalRisk(self.space.size, len(cfg.criteria), cfg.action.n_bins,
-                         cfg.risk.horizon, cfg.limits.max_states, cfg.limits.belief_top_k,
-                         cfg.limits.max_streams, cfg.risk.reach_horizon, cfg.risk.reach_radius,
-                         self._bounds())
+        return LocalRisk(
+            self.space.size,
+            len(cfg.criteria),
+            cfg.action.n_bins,
+            cfg.risk.horizon,
+            cfg.limits.max_states,
+            cfg.limits.belief_top_k,
+            cfg.limits.max_streams,
+            cfg.risk.reach_horizon,
+            cfg.risk.reach_radius,
+            self._bounds(),
+        )
 
     def _record_window(self) -> int:
         """The steps within which a failure counts against a decision in the shield's own
@@ -349,8 +389,9 @@ class Shield:
         try:
             z = np.array(observation, dtype=np.float64)
         except (TypeError, ValueError) as error:
-            raise InvalidObservation("observation must be a list of numbers",
-                                     field="observation") from error
+            raise InvalidObservation(
+                "observation must be a list of numbers", field="observation"
+            ) from error
         if z.shape != (self._dim,):
             raise InvalidObservation(
                 f"observation must hold {self._dim} numbers, got shape {list(z.shape)}",
@@ -358,11 +399,13 @@ class Shield:
             )
         problem = check_observation(z, MAX_MAGNITUDE)
         if problem == 1:
-            raise InvalidObservation("observation must be finite (no NaN or infinity)",
-                                     field="observation")
+            raise InvalidObservation(
+                "observation must be finite (no NaN or infinity)", field="observation"
+            )
         if problem == 2:
-            raise InvalidObservation(f"observation values must lie within +-{MAX_MAGNITUDE:g}",
-                                     field="observation")
+            raise InvalidObservation(
+                f"observation values must lie within +-{MAX_MAGNITUDE:g}", field="observation"
+            )
         if not isinstance(stream, str) or not 1 <= len(stream) <= 128:
             raise ShieldError("stream must be a string of 1 to 128 characters", field="stream")
         criterion = None
@@ -370,18 +413,27 @@ class Shield:
             criterion = self.config.criterion_index(event)
             if criterion is None:
                 known = ", ".join(c.name for c in self.config.criteria)
-                raise UnknownCriterion(f"unknown criterion {event!r} (known: {known})",
-                                       field="event")
+                raise UnknownCriterion(
+                    f"unknown criterion {event!r} (known: {known})", field="event"
+                )
         if action is None and not done:
             raise InvalidAction("action is required unless done is true", field="action")
         checked = None if action is None else self._check_action(action, "action")
-        applied = (None if applied_action is None
-                   else self._check_action(applied_action, "applied_action"))
+        applied = (
+            None if applied_action is None else self._check_action(applied_action, "applied_action")
+        )
         spec = self.config.action
         return StepInput(  # positional: on the per-step path
-            z, checked, 0 if checked is None else actions.encode(checked, spec), stream,
-            criterion, bool(done), -1 if applied is None else actions.encode(applied, spec),
-            bool(learn), bool(shadow))
+            z,
+            checked,
+            0 if checked is None else actions.encode(checked, spec),
+            stream,
+            criterion,
+            bool(done),
+            -1 if applied is None else actions.encode(applied, spec),
+            bool(learn),
+            bool(shadow),
+        )
 
     def _check_action(self, value: float, name: str) -> float:
         spec = self.config.action
@@ -415,9 +467,17 @@ class Shield:
         prob = np.empty(size)
         # clustering, then Eq. 1 recognition on the states after it
         space = self.space
-        kind, at, m, recognised = observe(step.observation, space.raw, space.scales,
-                                          space.features, z, *clusterer.arrays(), self._top_k,
-                                          index, prob)
+        kind, at, m, recognised = observe(
+            step.observation,
+            space.raw,
+            space.scales,
+            space.features,
+            z,
+            *clusterer.arrays(),
+            self._top_k,
+            index,
+            prob,
+        )
         is_new = kind == NEW
         if is_new:  # a new state expands every TPM
             self._add_state()
@@ -432,8 +492,9 @@ class Shield:
         if decide:
             by_bin = np.empty(self._risk_shape)
             verdicts = np.empty(self._risk_shape[0], dtype=np.int64)
-        decided, limit, worst, final, kept = self._learn(step, state, belief, z, recognised,
-                                                         is_new, decide, by_bin, verdicts)
+        decided, limit, worst, final, kept = self._learn(
+            step, state, belief, z, recognised, is_new, decide, by_bin, verdicts
+        )
         self.counters.steps += 1
         self.counters.model_version += 1
         if step.event is not None:
@@ -450,11 +511,23 @@ class Shield:
             return closing
 
         if self._by_risk:
-            decision = self._risk_decision(step, by_bin, verdicts, decided, limit, worst,
-                                           final, kept, recognised, is_new, state.step)
+            decision = self._risk_decision(
+                step,
+                by_bin,
+                verdicts,
+                decided,
+                limit,
+                worst,
+                final,
+                kept,
+                recognised,
+                is_new,
+                state.step,
+            )
         else:
-            decision = self._decide_by_flags(step, z, belief, recognised, is_new, state.step,
-                                             self._rng)
+            decision = self._decide_by_flags(
+                step, z, belief, recognised, is_new, state.step, self._rng
+            )
         assert decision.action is not None and step.action is not None
         state.belief, state.recognised, state.z = belief, recognised, z
         state.proposed_bin = step.action_bin
@@ -471,9 +544,18 @@ class Shield:
             self.counters.interventions[decision.verdict] += 1
         return decision
 
-    def _learn(self, step: StepInput, state: StreamState, belief: Belief, z: FloatArray,
-               recognised: int, is_new: bool, decide: bool, by_bin: FloatArray,
-               verdicts: npt.NDArray[np.int64]) -> tuple[bool, float, int, int, bool]:
+    def _learn(
+        self,
+        step: StepInput,
+        state: StreamState,
+        belief: Belief,
+        z: FloatArray,
+        recognised: int,
+        is_new: bool,
+        decide: bool,
+        by_bin: FloatArray,
+        verdicts: npt.NDArray[np.int64],
+    ) -> tuple[bool, float, int, int, bool]:
         """What the step learns from the stream's previous one (Eqs. 3-4 under the action
         behind the transition; the risk label of the action applied, :mod:`app.core.local_risk`,
         the risk reviser's only) and the flags of the recognised state, then, if ``decide``,
@@ -492,11 +574,22 @@ class Shield:
                 *self._arrays(),  # type: ignore[call-arg]  # (mypy cannot count a star-tuple)
                 _NO_INDEX if prev is None else prev.index,
                 _NO_FLOATS if prev is None else prev.prob,
-                _NO_FLOATS if state.z is None else state.z, belief.index, belief.prob, z,
-                recognised, state.recognised != recognised,
-                -1 if step.event is None else step.event, step.done, state.slot,
-                transition_bin if lazy else -1, risk_bin, decide, step.action_bin, by_bin,
-                verdicts)
+                _NO_FLOATS if state.z is None else state.z,
+                belief.index,
+                belief.prob,
+                z,
+                recognised,
+                state.recognised != recognised,
+                -1 if step.event is None else step.event,
+                step.done,
+                state.slot,
+                transition_bin if lazy else -1,
+                risk_bin,
+                decide,
+                step.action_bin,
+                by_bin,
+                verdicts,
+            )
             if not needed:
                 break
             assert isinstance(tpm, LazyTransitions)
@@ -537,8 +630,11 @@ class Shield:
 
     def _new_slot(self) -> int:
         """A free slot in the tables kept per stream: one a stream left, else the next."""
-        slot = self._free_slots.pop() if self._free_slots else (
-            len(self.streams) + len(self._free_slots))
+        slot = (
+            self._free_slots.pop()
+            if self._free_slots
+            else (len(self.streams) + len(self._free_slots))
+        )
         if self.local_risk is not None:
             self.local_risk.reserve(slot)
         return slot
@@ -564,47 +660,90 @@ class Shield:
         step's own: gathered again only when a part hands out other arrays (a state added,
         the TPM pool compacted, a stream's slot reserved)."""
         tpm, local = self.transitions, self.local_risk
-        parts = (tpm.arrays() if isinstance(tpm, LazyTransitions) else _NO_TRANSITIONS,
-                 _NO_RISK if local is None else local.arrays(), self.flags.arrays())
+        parts = (
+            tpm.arrays() if isinstance(tpm, LazyTransitions) else _NO_TRANSITIONS,
+            _NO_RISK if local is None else local.arrays(),
+            self.flags.arrays(),
+        )
         old = self._parts
-        if (not old or parts[0] is not old[0] or parts[1] is not old[1]
-                or parts[2] is not old[2]):
+        if not old or parts[0] is not old[0] or parts[1] is not old[1] or parts[2] is not old[2]:
             cfg = self.config
             self._parts = parts
             self._model_arrays = (
-                cfg.transitions.learning_rate, *parts[0], cfg.risk.horizon, *parts[1],
-                *parts[2], cfg.reviser.flags == "rate", cfg.reviser.flag_min_rate,
-                self._safe_steps, cfg.risk.threshold, cfg.risk.margin,
-                0 if local is None else cfg.risk.reach_horizon, cfg.risk.reach_radius)
+                cfg.transitions.learning_rate,
+                *parts[0],
+                cfg.risk.horizon,
+                *parts[1],
+                *parts[2],
+                cfg.reviser.flags == "rate",
+                cfg.reviser.flag_min_rate,
+                self._safe_steps,
+                cfg.risk.threshold,
+                cfg.risk.margin,
+                0 if local is None else cfg.risk.reach_horizon,
+                cfg.risk.reach_radius,
+            )
         return self._model_arrays
 
     def _what_if(self, step: StepInput) -> Decision:
         """``learn=False``: answer from the model as it is, changing nothing (noise included)."""
         state = self.streams.get(step.stream) or StreamState(-1)
         if self.n_states == 0:
-            return self._closing(step, None, False, state.step) if step.done else Decision(
-                action=step.action, proposed=step.action, revised=False, reason="cold_start",
-                verdict="ok", risk=self._risk(None), threshold=None, candidates=(), state=None,
-                n_states=0, new_state=False, episode=self.counters.episodes, step=state.step,
-                model_version=self.counters.model_version, stream=step.stream,
-                shadow=step.shadow, suggested=step.action,
+            return (
+                self._closing(step, None, False, state.step)
+                if step.done
+                else Decision(
+                    action=step.action,
+                    proposed=step.action,
+                    revised=False,
+                    reason="cold_start",
+                    verdict="ok",
+                    risk=self._risk(None),
+                    threshold=None,
+                    candidates=(),
+                    state=None,
+                    n_states=0,
+                    new_state=False,
+                    episode=self.counters.episodes,
+                    step=state.step,
+                    model_version=self.counters.model_version,
+                    stream=step.stream,
+                    shadow=step.shadow,
+                    suggested=step.action,
+                )
             )
         z = self.normalise(step.observation)
-        belief = recognise(self.clusterer.sq_distances(z), self.clusterer.variances(),
-                           self.config.limits.belief_top_k)
+        belief = recognise(
+            self.clusterer.sq_distances(z),
+            self.clusterer.variances(),
+            self.config.limits.belief_top_k,
+        )
         if step.done:
             return self._closing(step, belief.argmax(), False, state.step)
         rng = copy.deepcopy(self._rng)
         return self._decide(step, z, belief, belief.argmax(), False, state.step, rng)
 
-    def _closing(self, step: StepInput, recognised: int | None, is_new: bool,
-                 index: int) -> Decision:
+    def _closing(
+        self, step: StepInput, recognised: int | None, is_new: bool, index: int
+    ) -> Decision:
         return Decision(
-            action=None, proposed=step.action, revised=False, reason="done", verdict="ok",
-            risk=self._risk(None), threshold=None, candidates=(), state=recognised,
-            n_states=self.n_states, new_state=is_new, episode=self.counters.episodes,
-            step=index, model_version=self.counters.model_version, stream=step.stream,
-            shadow=step.shadow, suggested=None,
+            action=None,
+            proposed=step.action,
+            revised=False,
+            reason="done",
+            verdict="ok",
+            risk=self._risk(None),
+            threshold=None,
+            candidates=(),
+            state=recognised,
+            n_states=self.n_states,
+            new_state=is_new,
+            episode=self.counters.episodes,
+            step=index,
+            model_version=self.counters.model_version,
+            stream=step.stream,
+            shadow=step.shadow,
+            suggested=None,
         )
 
     def _risk(self, pred: FloatArray | None) -> dict[str, float]:
@@ -633,33 +772,60 @@ class Shield:
         q = cfg.action.n_bins
 
         def assess(action_bin: int) -> tuple[int, float, FloatArray]:
-            pred = reviser.predict_ahead(self.transitions, belief, action_bin, cfg.reviser,
-                                         cfg.limits.belief_top_k)
+            pred = reviser.predict_ahead(
+                self.transitions, belief, action_bin, cfg.reviser, cfg.limits.belief_top_k
+            )
             threshold = reviser.variant_threshold(pred)
             verdict = reviser.inspect(pred, threshold, flagged, cfg.reviser.inspect)
             return verdict, threshold, pred
 
-        common = dict(
-            proposed=proposed, state=recognised, n_states=self.n_states, new_state=is_new,
-            episode=self.counters.episodes, step=index,
-            model_version=self.counters.model_version, stream=step.stream, shadow=step.shadow,
+        common: dict[str, Any] = dict(
+            proposed=proposed,
+            state=recognised,
+            n_states=self.n_states,
+            new_state=is_new,
+            episode=self.counters.episodes,
+            step=index,
+            model_version=self.counters.model_version,
+            stream=step.stream,
+            shadow=step.shadow,
         )
         if flagged[0].size == 0:
-            return Decision(action=proposed, revised=False, reason="cold_start", verdict="ok",
-                            risk=self._risk(None), threshold=None, candidates=(),
-                            suggested=proposed, **common)  # type: ignore[arg-type]
+            return Decision(
+                action=proposed,
+                revised=False,
+                reason="cold_start",
+                verdict="ok",
+                risk=self._risk(None),
+                threshold=None,
+                candidates=(),
+                suggested=proposed,
+                **common,
+            )
         start = step.action_bin
         verdict, threshold, pred = assess(start)
-        record = dict(verdict=self._verdict_name(verdict), risk=self._risk(pred),
-                      threshold=threshold)
+        record: dict[str, Any] = dict(
+            verdict=self._verdict_name(verdict), risk=self._risk(pred), threshold=threshold
+        )
         active = self.counters.episodes >= cfg.reviser.activate_after_episodes
         if verdict == reviser.OK or not active:
             reason = "pass" if active else "inactive"
-            return Decision(action=proposed, revised=False, reason=reason, candidates=(),
-                            suggested=proposed, **record, **common)  # type: ignore[arg-type]
+            return Decision(
+                action=proposed,
+                revised=False,
+                reason=reason,
+                candidates=(),
+                suggested=proposed,
+                **record,
+                **common,
+            )
 
         final, tried = reviser.search(
-            start, verdict, self._directions, q, cfg.reviser.search == "literal",
+            start,
+            verdict,
+            self._directions,
+            q,
+            cfg.reviser.search == "literal",
             lambda r: assess(r)[0],
         )
         std = reviser.noise_std(cfg.reviser, self._a_max, self.counters.episodes)
@@ -674,13 +840,25 @@ class Shield:
         )
         reason = "revised_safety" if slower else "revised_speed"
         return Decision(
-            action=proposed if step.shadow else revised, revised=True, reason=reason,
-            candidates=candidates, suggested=revised, **record, **common,  # type: ignore[arg-type]
+            action=proposed if step.shadow else revised,
+            revised=True,
+            reason=reason,
+            candidates=candidates,
+            suggested=revised,
+            **record,
+            **common,
         )
 
-    def _decide_by_risk(self, step: StepInput, z: FloatArray, belief: Belief,
-                        recognised: int, is_new: bool, index: int, rng: np.random.Generator
-                        ) -> Decision:
+    def _decide_by_risk(
+        self,
+        step: StepInput,
+        z: FloatArray,
+        belief: Belief,
+        recognised: int,
+        is_new: bool,
+        index: int,
+        rng: np.random.Generator,
+    ) -> Decision:
         """The risk reviser on a step that learns nothing (``learn=False``; a step that
         learns decides in its compiled call, :meth:`_learn`). No noise: ``rng`` is not drawn
         from."""
@@ -689,16 +867,38 @@ class Shield:
         by_bin = np.empty(self._risk_shape)
         verdicts = np.empty(self._risk_shape[0], dtype=np.int64)
         decided = local.any_failure
-        limit, worst, final, kept = local.decide(
-            belief, z, step.action_bin, self.config.risk.threshold, self.config.risk.margin,
-            self._safe_steps, by_bin, verdicts) if decided else (0.0, 0, 0, False)
-        return self._risk_decision(step, by_bin, verdicts, decided, limit, worst, final, kept,
-                                   recognised, is_new, index)
+        limit, worst, final, kept = (
+            local.decide(
+                belief,
+                z,
+                step.action_bin,
+                self.config.risk.threshold,
+                self.config.risk.margin,
+                self._safe_steps,
+                by_bin,
+                verdicts,
+            )
+            if decided
+            else (0.0, 0, 0, False)
+        )
+        return self._risk_decision(
+            step, by_bin, verdicts, decided, limit, worst, final, kept, recognised, is_new, index
+        )
 
-    def _risk_decision(self, step: StepInput, by_bin: FloatArray,
-                       verdicts: npt.NDArray[np.int64], decided: bool, limit: float,
-                       worst: int, final: int, kept: bool, recognised: int, is_new: bool,
-                       index: int) -> Decision:
+    def _risk_decision(
+        self,
+        step: StepInput,
+        by_bin: FloatArray,
+        verdicts: npt.NDArray[np.int64],
+        decided: bool,
+        limit: float,
+        worst: int,
+        final: int,
+        kept: bool,
+        recognised: int,
+        is_new: bool,
+        index: int,
+    ) -> Decision:
         """The risk reviser's decision record (:mod:`app.core.local_risk`,
         :mod:`app.core.risk`): the proposal kept unless its risk is over the threshold and
         beyond the margin of the safest action's; then the nearest allowed bin, at its
@@ -728,18 +928,38 @@ class Shield:
                 suggested, reason = self._bin_actions[final], "backed_off"
             else:
                 way = 1 if final > start else -1
-                candidates = RiskCandidates(range(start + way, final + way, way), by_bin,
-                                            verdicts, names, self._bin_actions,
-                                            self._verdicts_named)
+                candidates = RiskCandidates(
+                    range(start + way, final + way, way),
+                    by_bin,
+                    verdicts,
+                    names,
+                    self._bin_actions,
+                    self._verdicts_named,
+                )
                 suggested = self._bin_actions[final]
                 action = proposed if step.shadow else suggested
                 reason = "revised_safety" if final < start else "revised_speed"
                 revised = True
         counters = self.counters
         return Decision(  # positional: on the per-step path, and half the cost of keywords
-            action, proposed, revised, reason, verdict, risks, threshold, candidates,
-            recognised, self.clusterer.n_states, is_new, counters.episodes, index,
-            counters.model_version, step.stream, step.shadow, suggested)
+            action,
+            proposed,
+            revised,
+            reason,
+            verdict,
+            risks,
+            threshold,
+            candidates,
+            recognised,
+            self.clusterer.n_states,
+            is_new,
+            counters.episodes,
+            index,
+            counters.model_version,
+            step.stream,
+            step.shadow,
+            suggested,
+        )
 
     def _verdict_name(self, verdict: int) -> str:
         return "ok" if verdict == reviser.OK else self.config.criteria[verdict].name
@@ -782,8 +1002,10 @@ class Shield:
         local = self.local_risk
         if local is None or self.config.risk.reach_horizon == 0:
             return {c.name: np.zeros((0, self.space.size)) for c in self.config.criteria}
-        return {c.name: self.physical(local.failure_points(i))
-                for i, c in enumerate(self.config.criteria)}
+        return {
+            c.name: self.physical(local.failure_points(i))
+            for i, c in enumerate(self.config.criteria)
+        }
 
     def state_view(self, index: int) -> dict[str, Any]:
         """One state: centre in physical units, spread, flag, visits, entries, failures by
@@ -797,18 +1019,23 @@ class Shield:
             "flag": names[int(self.flags.flags[index])],
             "visits": int(self.flags.visits[index]),
             "entries": int(self.flags.entries[index]),
-            "failures": {c.name: int(f) for c, f in zip(self.config.criteria, failures,
-                                                         strict=True)},
-            "record": dict(zip(RECORD_COLUMNS, self._record_counts()[index].tolist(),
-                               strict=True)),
+            "failures": {
+                c.name: int(f) for c, f in zip(self.config.criteria, failures, strict=True)
+            },
+            "record": dict(zip(RECORD_COLUMNS, self._record_counts()[index].tolist(), strict=True)),
             "backed_off": self.local_risk is not None and self.record.backs_off(index),
         }
 
     def _totals(self) -> list[int]:
         """The model's totals now, in the columns of :class:`~app.core.history.History`."""
         c = self.counters
-        return [c.episodes, c.steps, self.n_states, *(c.interventions[n] for n in self._names),
-                *(c.failures[n] for n in self._names)]
+        return [
+            c.episodes,
+            c.steps,
+            self.n_states,
+            *(c.interventions[n] for n in self._names),
+            *(c.failures[n] for n in self._names),
+        ]
 
     def history_view(self) -> dict[str, Any]:
         """The totals at the end of episodes (:mod:`app.core.history`), one list per column,
@@ -822,9 +1049,14 @@ class Shield:
             "n_states": rows[:, N_STATES].tolist(),
             "interventions": {n: rows[:, TOTALS + i].tolist() for i, n in enumerate(self._names)},
             "failures": {n: rows[:, TOTALS + k + i].tolist() for i, n in enumerate(self._names)},
-            "totals": {"episodes": c.episodes, "steps": c.steps, "n_states": self.n_states,
-                       "model_version": c.model_version,
-                       "interventions": dict(c.interventions), "failures": dict(c.failures)},
+            "totals": {
+                "episodes": c.episodes,
+                "steps": c.steps,
+                "n_states": self.n_states,
+                "model_version": c.model_version,
+                "interventions": dict(c.interventions),
+                "failures": dict(c.failures),
+            },
         }
 
     def next_states(self, index: int, top: int = 5) -> list[list[tuple[int, float]]]:
@@ -855,8 +1087,9 @@ class Shield:
             "clustering": self.clusterer.snapshot(),
             "transitions": self.transitions.snapshot(),
             "flags": self.flags.snapshot(),
-            "local_risk": None if self.local_risk is None else self.local_risk.snapshot(
-                {name: s.slot for name, s in self.streams.items()}),
+            "local_risk": None
+            if self.local_risk is None
+            else self.local_risk.snapshot({name: s.slot for name, s in self.streams.items()}),
             "record": None if self.local_risk is None else self.record.snapshot(),
             "streams": {
                 name: {
@@ -872,8 +1105,9 @@ class Shield:
         }
 
     @classmethod
-    def from_snapshot(cls, data: dict[str, Any],
-                      check: Callable[[ShieldConfig], None] | None = None) -> Shield:
+    def from_snapshot(
+        cls, data: dict[str, Any], check: Callable[[ShieldConfig], None] | None = None
+    ) -> Shield:
         """Rebuild a shield that makes exactly the decisions the original would make.
 
         Every part is checked before it is used (:mod:`app.core._stored`): sizes against the
@@ -886,18 +1120,24 @@ class Shield:
         try:
             return cls._restore(data, check)
         except InvalidConfig as error:
-            raise InvalidSnapshot(f"its configuration: {error.message}",
-                                  field=f"config.{error.field}" if error.field else "config"
-                                  ) from error
+            raise InvalidSnapshot(
+                f"its configuration: {error.message}",
+                field=f"config.{error.field}" if error.field else "config",
+            ) from error
         except ShieldError:
             raise
-        except (KeyError, TypeError, ValueError, IndexError, OverflowError,
-                AttributeError) as error:
+        except (
+            KeyError,
+            TypeError,
+            ValueError,
+            IndexError,
+            OverflowError,
+            AttributeError,
+        ) as error:
             raise InvalidSnapshot(f"snapshot is incomplete or inconsistent: {error!r}") from error
 
     @classmethod
-    def _restore(cls, data: dict[str, Any],
-                 check: Callable[[ShieldConfig], None] | None) -> Shield:
+    def _restore(cls, data: dict[str, Any], check: Callable[[ShieldConfig], None] | None) -> Shield:
         config = ShieldConfig.from_stored(data["config"])
         if check is not None:
             check(config)
@@ -908,41 +1148,53 @@ class Shield:
         self.counters = Counters(
             steps=steps,
             episodes=stored.integer(counters["episodes"], "counters.episodes", high=steps),
-            model_version=stored.integer(counters["model_version"], "counters.model_version",
-                                         high=stored.MAX_COUNT),
-            interventions={c.name: stored.integer(counters["interventions"][c.name],
-                                                  f"counters.interventions.{c.name}",
-                                                  high=steps)
-                           for c in cfg.criteria},
-            streams_expired=stored.integer(counters.get("streams_expired", 0),
-                                           "counters.streams_expired", high=steps),
+            model_version=stored.integer(
+                counters["model_version"], "counters.model_version", high=stored.MAX_COUNT
+            ),
+            interventions={
+                c.name: stored.integer(
+                    counters["interventions"][c.name],
+                    f"counters.interventions.{c.name}",
+                    high=steps,
+                )
+                for c in cfg.criteria
+            },
+            streams_expired=stored.integer(
+                counters.get("streams_expired", 0), "counters.streams_expired", high=steps
+            ),
         )
         self._rng.bit_generator.state = data["rng"]
         limit = cfg.limits.max_states
-        self.clusterer = EvolvingClusterer.restore(cfg.clustering, self.space.size, limit,
-                                                   data["clustering"])
+        self.clusterer = EvolvingClusterer.restore(
+            cfg.clustering, self.space.size, limit, data["clustering"]
+        )
         tpm = data["transitions"]
         if tpm["backend"] != cfg.limits.tpm_backend:
-            raise InvalidSnapshot(f"the matrices are {tpm['backend']!r}, the configuration's "
-                                  f"backend {cfg.limits.tpm_backend!r}",
-                                  field="transitions.backend")
+            raise InvalidSnapshot(
+                f"the matrices are {tpm['backend']!r}, the configuration's "
+                f"backend {cfg.limits.tpm_backend!r}",
+                field="transitions.backend",
+            )
         if tpm["backend"] == "dense":
             self.transitions = DenseTransitions.restore(cfg.action.n_bins, cfg.transitions, tpm)
         else:
-            self.transitions = LazyTransitions.restore(cfg.action.n_bins, cfg.transitions,
-                                                       limit, tpm)
-        self.flags = StateFlags.restore(cfg.reviser.flags, limit, len(cfg.criteria),
-                                        cfg.reviser.flag_min_rate, data["flags"])
+            self.transitions = LazyTransitions.restore(
+                cfg.action.n_bins, cfg.transitions, limit, tpm
+            )
+        self.flags = StateFlags.restore(
+            cfg.reviser.flags, limit, len(cfg.criteria), cfg.reviser.flag_min_rate, data["flags"]
+        )
         n = self.clusterer.n_states
         if self.transitions.n_states != n or self.flags.flags.shape[0] != n:
             raise InvalidSnapshot("states, matrices and flags disagree on the state count")
         self._restore_history(data)
         streams = data["streams"]
         if len(streams) > cfg.limits.max_streams:
-            raise InvalidSnapshot(f"more than {cfg.limits.max_streams} streams",
-                                  field="streams")
-        self.streams = {str(name): self._restore_stream(f"streams.{name}", s, n, slot)
-                        for slot, (name, s) in enumerate(streams.items())}
+            raise InvalidSnapshot(f"more than {cfg.limits.max_streams} streams", field="streams")
+        self.streams = {
+            str(name): self._restore_stream(f"streams.{name}", s, n, slot)
+            for slot, (name, s) in enumerate(streams.items())
+        }
         self._restore_risk(data, n)
         self._check_counts()
         return self
@@ -967,12 +1219,13 @@ class Shield:
         if self.local_risk is not None:
             parts.append(("local_risk.tried", total(self.local_risk.tried), steps))
             parts.append(("local_risk.failures", total(self.local_risk.failures), steps))
-            parts.append(("record.counts",
-                          total(self.record.counts[:, [REVISED, PASSED]]), steps))
+            parts.append(("record.counts", total(self.record.counts[:, [REVISED, PASSED]]), steps))
         for field_name, count, most in parts:
             if count > most:
-                raise InvalidSnapshot(f"{count:.0f} counted, more than the {most} learning "
-                                      "steps behind it", field=field_name)
+                raise InvalidSnapshot(
+                    f"{count:.0f} counted, more than the {most} learning steps behind it",
+                    field=field_name,
+                )
         if (flags.entries > flags.visits).any():
             raise InvalidSnapshot("a state entered more often than visited", field="flags.entries")
         if (flags.failures.sum(axis=1, dtype=np.float64) > flags.visits).any():
@@ -984,19 +1237,23 @@ class Shield:
         the failures its states counted, and one row of the totals now."""
         failures = data["counters"].get("failures")
         self.counters.failures = (
-            {c.name: int(f) for c, f in zip(self.config.criteria,
-                                            self.flags.failures.sum(axis=0), strict=True)}
-            if failures is None else
-            {c.name: stored.integer(failures[c.name], f"counters.failures.{c.name}")
-             for c in self.config.criteria})
+            {
+                c.name: int(f)
+                for c, f in zip(self.config.criteria, self.flags.failures.sum(axis=0), strict=True)
+            }
+            if failures is None
+            else {
+                c.name: stored.integer(failures[c.name], f"counters.failures.{c.name}")
+                for c in self.config.criteria
+            }
+        )
         self.history = History(len(self._names))
         if data.get("history") is not None:
             self.history = History.restore(len(self._names), data["history"], self._totals())
         elif self.counters.episodes:
             self.history.record(self._totals())
 
-    def _restore_stream(self, field: str, data: dict[str, Any], n: int, slot: int
-                        ) -> StreamState:
+    def _restore_stream(self, field: str, data: dict[str, Any], n: int, slot: int) -> StreamState:
         """One stream's state in ``slot``, its belief and bins checked against the model's
         sizes."""
         if not 1 <= len(field) - len("streams.") <= 128:
@@ -1004,23 +1261,23 @@ class Shield:
         belief = None
         if data["index"] is not None:
             index = stored.ints(data["index"], f"{field}.index", high=n - 1).ravel()
-            prob = stored.floats(data["prob"], f"{field}.prob", index.shape, low=0.0,
-                                 high=1.0)
+            prob = stored.floats(data["prob"], f"{field}.prob", index.shape, low=0.0, high=1.0)
             if not index.size or np.unique(index).size != index.size:
                 raise InvalidSnapshot("a belief names distinct states", field=f"{field}.index")
             stored.distribution(prob, f"{field}.prob")
             belief = Belief(index, prob)
         q = self.config.action.n_bins
-        return StreamState(slot, belief,
-                           stored.integer(data["applied_bin"], f"{field}.applied_bin",
-                                          high=q - 1),
-                           stored.integer(data["proposed_bin"], f"{field}.proposed_bin",
-                                          high=q - 1),
-                           stored.integer(data["step"], f"{field}.step",
-                                          high=self.counters.steps),
-                           -1 if belief is None else belief.argmax(),
-                           None if belief is None or data.get("z") is None
-                           else stored.floats(data["z"], f"{field}.z", (self.space.size,)))
+        return StreamState(
+            slot,
+            belief,
+            stored.integer(data["applied_bin"], f"{field}.applied_bin", high=q - 1),
+            stored.integer(data["proposed_bin"], f"{field}.proposed_bin", high=q - 1),
+            stored.integer(data["step"], f"{field}.step", high=self.counters.steps),
+            -1 if belief is None else belief.argmax(),
+            None
+            if belief is None or data.get("z") is None
+            else stored.floats(data["z"], f"{field}.z", (self.space.size,)),
+        )
 
     def _restore_risk(self, data: dict[str, Any], n: int) -> None:
         """The risk reviser's local model (a snapshot of format 3 also holds the counts of the
@@ -1028,5 +1285,4 @@ class Shield:
         if self.local_risk is not None:
             slots = {name: s.slot for name, s in self.streams.items()}
             self.local_risk = LocalRisk.restore(self.local_risk, n, slots, data["local_risk"])
-            self.record = Record.restore(self._record_window(), n, self.streams,
-                                         data.get("record"))
+            self.record = Record.restore(self._record_window(), n, self.streams, data.get("record"))

@@ -71,9 +71,9 @@ class TransitionModel(Protocol):
 def marginal_by_action(model: TransitionModel, belief: Belief, transpose: bool) -> FloatArray:
     """Eq. 7's step as written: the mean of Eq. 5 over every action, summed in action order."""
     q = model.n_actions
-    total: FloatArray = sum(
-        (model.predict(belief, r, transpose) for r in range(q)), np.zeros(model.n_states)
-    ) / q
+    total: FloatArray = (
+        sum((model.predict(belief, r, transpose) for r in range(q)), np.zeros(model.n_states)) / q
+    )
     return total
 
 
@@ -89,9 +89,7 @@ def update_counts(
     return F_new, F_o_new
 
 
-def grow_counts(
-    F: FloatArray, F_o: FloatArray, prior: float
-) -> tuple[FloatArray, FloatArray]:
+def grow_counts(F: FloatArray, F_o: FloatArray, prior: float) -> tuple[FloatArray, FloatArray]:
     """Expansion with epsilon-bar padding: a new row and column of epsilon-bar."""
     n = F.shape[0]
     F_new = np.full((n + 1, n + 1), prior)

@@ -59,22 +59,23 @@ def from_json(value: Any, limit: int = DEFAULT_LIMIT) -> Any:
 def _array(tagged: dict[str, Any], path: str, budget: list[int]) -> np.ndarray:
     dtype, shape, data = tagged.get(ARRAY), tagged.get("shape"), tagged.get("data")
     if dtype not in DTYPES:
-        raise InvalidSnapshot(f"array dtype {dtype!r} is not one of {sorted(DTYPES)}",
-                              field=path)
-    if not (isinstance(shape, list) and all(isinstance(d, int) and not isinstance(d, bool)
-                                            and d >= 0 for d in shape)):
+        raise InvalidSnapshot(f"array dtype {dtype!r} is not one of {sorted(DTYPES)}", field=path)
+    if not (
+        isinstance(shape, list)
+        and all(isinstance(d, int) and not isinstance(d, bool) and d >= 0 for d in shape)
+    ):
         raise InvalidSnapshot("an array's shape is a list of sizes", field=path)
     if not isinstance(data, list) or len(data) != math.prod(shape):
-        raise InvalidSnapshot("an array's data must hold as many numbers as its shape",
-                              field=path)
+        raise InvalidSnapshot("an array's data must hold as many numbers as its shape", field=path)
     budget[0] -= len(data) * np.dtype(dtype).itemsize
     if budget[0] < 0:
         raise InvalidSnapshot("the snapshot's arrays exceed the size limit", field=path)
     try:
         return np.array(data, dtype=np.dtype(dtype)).reshape(shape)
     except (TypeError, ValueError, OverflowError) as error:
-        raise InvalidSnapshot(f"an array holds something else than numbers: {error}",
-                              field=path) from error
+        raise InvalidSnapshot(
+            f"an array holds something else than numbers: {error}", field=path
+        ) from error
 
 
 def to_npz(snapshot: dict[str, Any]) -> bytes:
@@ -113,22 +114,34 @@ def from_npz(blob: bytes, limit: int = DEFAULT_LIMIT) -> dict[str, Any]:
             if len(set(names)) != len(names):
                 raise InvalidSnapshot("the archive names a member twice", field="body")
             if sum(info.file_size for info in infos) > limit:
-                raise InvalidSnapshot("the archive inflates beyond the size limit",
-                                      field="body")
+                raise InvalidSnapshot("the archive inflates beyond the size limit", field="body")
             if META not in names:
                 raise InvalidSnapshot("the archive lacks its meta member", field="meta")
             meta = json.loads(str(_read_member(archive, META)))
             named = {f"{path}.npy" for path in _array_paths(meta)}
             for name in names:
                 if name != META and name not in named:
-                    raise InvalidSnapshot("a member the snapshot does not name",
-                                          field=name.removesuffix(".npy"))
-            members = {name.removesuffix(".npy"): _read_member(archive, name)
-                       for name in names if name != META}
+                    raise InvalidSnapshot(
+                        "a member the snapshot does not name", field=name.removesuffix(".npy")
+                    )
+            members = {
+                name.removesuffix(".npy"): _read_member(archive, name)
+                for name in names
+                if name != META
+            }
     except InvalidSnapshot:
         raise
-    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError,
-            RecursionError, UnicodeDecodeError, NotImplementedError) as error:
+    except (
+        zipfile.BadZipFile,
+        zlib.error,
+        EOFError,
+        OSError,
+        ValueError,
+        KeyError,
+        RecursionError,
+        UnicodeDecodeError,
+        NotImplementedError,
+    ) as error:
         raise InvalidSnapshot(f"unreadable archive: {error}", field="body") from error
 
     def fill(value: Any) -> Any:
@@ -176,16 +189,16 @@ def _read_member(archive: zipfile.ZipFile, name: str) -> np.ndarray:
             raise InvalidSnapshot(f"array dtype {dtype.str!r} is not allowed", field=key)
         size = math.prod(shape) * dtype.itemsize
         if member.tell() + size != declared:
-            raise InvalidSnapshot("an array's header and its member's size disagree",
-                                  field=key)
+            raise InvalidSnapshot("an array's header and its member's size disagree", field=key)
         data = bytearray(size)  # the only copy: the array is a writeable view of it
         if member.readinto(data) != size:  # type: ignore[attr-defined]  # (a ZipExtFile)
             raise InvalidSnapshot("an array's data ends early", field=key)
     return np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C")
 
 
-def readable(shield: Shield, tpm: str = "sparse", action: int | None = None,
-             min_prob: float = 1e-3) -> dict[str, Any]:
+def readable(
+    shield: Shield, tpm: str = "sparse", action: int | None = None, min_prob: float = 1e-3
+) -> dict[str, Any]:
     """What a person reads: states (with the shield's own record there, and whether it backs
     off there) and the reach's failure points in physical units, and the
     matrices (``sparse`` keeps the entries of at least ``min_prob``; ``dense`` all of them;
@@ -207,8 +220,9 @@ def readable(shield: Shield, tpm: str = "sparse", action: int | None = None,
             }
             for i in range(shield.n_states)
         ],
-        "failure_points": {name: points.tolist()
-                           for name, points in shield.failure_points().items()},
+        "failure_points": {
+            name: points.tolist() for name, points in shield.failure_points().items()
+        },
     }
     if tpm == "none":
         return out
@@ -220,8 +234,17 @@ def readable(shield: Shield, tpm: str = "sparse", action: int | None = None,
             matrices.append({"bin": b, "dense": P.tolist()})
         else:
             rows, cols = np.nonzero(P >= min_prob)
-            matrices.append({"bin": b, "rows": rows.tolist(), "cols": cols.tolist(),
-                             "probs": P[rows, cols].tolist()})
-    out["tpm"] = {"format": tpm, "min_prob": min_prob if tpm == "sparse" else None,
-                  "matrices": matrices}
+            matrices.append(
+                {
+                    "bin": b,
+                    "rows": rows.tolist(),
+                    "cols": cols.tolist(),
+                    "probs": P[rows, cols].tolist(),
+                }
+            )
+    out["tpm"] = {
+        "format": tpm,
+        "min_prob": min_prob if tpm == "sparse" else None,
+        "matrices": matrices,
+    }
     return out

@@ -37,13 +37,29 @@ class TooManyKeys(ShieldError):
     code = "too_large"
 
 
-def fingerprint(observation: Sequence[float], action: float | None, stream: str,
-                event: str | None, done: bool, applied_action: float | None, learn: bool,
-                shadow: bool) -> str:
+def fingerprint(
+    observation: Sequence[float],
+    action: float | None,
+    stream: str,
+    event: str | None,
+    done: bool,
+    applied_action: float | None,
+    learn: bool,
+    shadow: bool,
+) -> str:
     """What makes two steps the same step (8 bytes of BLAKE2b, in hex)."""
-    identity = repr(([float(v) for v in observation], None if action is None else float(action),
-                     stream, event, done,
-                     None if applied_action is None else float(applied_action), learn, shadow))
+    identity = repr(
+        (
+            [float(v) for v in observation],
+            None if action is None else float(action),
+            stream,
+            event,
+            done,
+            None if applied_action is None else float(applied_action),
+            learn,
+            shadow,
+        )
+    )
     return hashlib.blake2b(identity.encode(), digest_size=8).hexdigest()
 
 
@@ -64,8 +80,10 @@ class KeyWindow:
         if entry is None:
             return None
         if entry[0] != print_:
-            raise KeyReused(f"idempotency key {key!r} was sent with another step; a key names "
-                            "one step", field=field)
+            raise KeyReused(
+                f"idempotency key {key!r} was sent with another step; a key names one step",
+                field=field,
+            )
         return Decision.from_dict(orjson.loads(entry[1]))
 
     def remember(self, key: str, print_: str, decision: Decision) -> None:
@@ -79,9 +97,11 @@ class KeyWindow:
         """Refuse one request that carries more keyed steps than the window holds: a retry of
         it could not be answered in full."""
         if keys > self.size:
-            raise TooManyKeys(f"a request carries at most {self.size} steps with an "
-                              "idempotency key for one model (the server's idempotency_window)",
-                              field=field)
+            raise TooManyKeys(
+                f"a request carries at most {self.size} steps with an "
+                "idempotency key for one model (the server's idempotency_window)",
+                field=field,
+            )
 
     def entries(self) -> list[Entry]:
         """The window, oldest first, as the journal stores it."""

@@ -30,14 +30,23 @@ class ModelLimits:
         """Refuse a configuration beyond these bounds, naming the field to lower."""
         spec = config.observation
         checks = (
-            (config.limits.max_states <= self.max_states, "limits.max_states",
-             f"this server allows at most {self.max_states} states a model"),
-            (config.action.n_bins <= self.max_action_bins, "action.step",
-             f"this server allows at most {self.max_action_bins} action bins a model "
-             f"(this range and step make {config.action.n_bins})"),
-            (spec.size + len(spec.features) <= self.max_dimensions, "observation.names",
-             f"this server allows at most {self.max_dimensions} observation names and "
-             "features together"),
+            (
+                config.limits.max_states <= self.max_states,
+                "limits.max_states",
+                f"this server allows at most {self.max_states} states a model",
+            ),
+            (
+                config.action.n_bins <= self.max_action_bins,
+                "action.step",
+                f"this server allows at most {self.max_action_bins} action bins a model "
+                f"(this range and step make {config.action.n_bins})",
+            ),
+            (
+                spec.size + len(spec.features) <= self.max_dimensions,
+                "observation.names",
+                f"this server allows at most {self.max_dimensions} observation names and "
+                "features together",
+            ),
         )
         for ok, field, message in checks:
             if not ok:
@@ -48,7 +57,9 @@ class ModelLimits:
                 f"a model of this configuration holds up to {needed / 2**20:.0f} MiB of tables "
                 f"at its limits.max_states and limits.max_streams; this server allows "
                 f"{self.max_model_bytes / 2**20:.0f} MiB a model: lower limits.max_states (or "
-                "limits.max_streams, the action bins, the dimensions)", field="limits.max_states")
+                "limits.max_streams, the action bins, the dimensions)",
+                field="limits.max_states",
+            )
 
 
 def table_bytes(config: ShieldConfig) -> int:

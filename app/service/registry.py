@@ -108,8 +108,15 @@ class Step:
 
     def journal(self) -> dict[str, Any]:
         """The record that replays this step (and remembers its key)."""
-        record = {"o": list(self.observation), "a": self.action, "s": self.stream,
-                  "e": self.event, "d": self.done, "p": self.applied_action, "h": self.shadow}
+        record = {
+            "o": list(self.observation),
+            "a": self.action,
+            "s": self.stream,
+            "e": self.event,
+            "d": self.done,
+            "p": self.applied_action,
+            "h": self.shadow,
+        }
         if self.key is not None:
             record["k"] = self.key
         return record
@@ -120,18 +127,33 @@ class Step:
 
     def fingerprint(self) -> str:
         """What a step sent again under the same key must match."""
-        return fingerprint(self.observation, self.action, self.stream, self.event, self.done,
-                           self.applied_action, self.learn, self.shadow)
+        return fingerprint(
+            self.observation,
+            self.action,
+            self.stream,
+            self.event,
+            self.done,
+            self.applied_action,
+            self.learn,
+            self.shadow,
+        )
 
 
 class ModelRegistry:
     """The models of one server."""
 
-    def __init__(self, data_dir: Path | None = None, fsync: Fsync = "interval",
-                 snapshot_every: int = 50_000,
-                 default_config: ShieldConfig | None = None, *, max_models: int = 1000,
-                 limits: ModelLimits | None = None, create_default: bool = True,
-                 idempotency_window: int = IDEMPOTENCY_WINDOW) -> None:
+    def __init__(
+        self,
+        data_dir: Path | None = None,
+        fsync: Fsync = "interval",
+        snapshot_every: int = 50_000,
+        default_config: ShieldConfig | None = None,
+        *,
+        max_models: int = 1000,
+        limits: ModelLimits | None = None,
+        create_default: bool = True,
+        idempotency_window: int = IDEMPOTENCY_WINDOW,
+    ) -> None:
         self.data_dir = data_dir
         self.idempotency_window = idempotency_window
         self.max_models = max_models
@@ -165,15 +187,20 @@ class ModelRegistry:
                     model = self._load(directory)
                 except Exception as error:  # any damage to any file: set this model aside
                     reason = f"{type(error).__name__}: {error}"
-                    log.error("model %r is quarantined, its files in %s are kept as they are: "
-                              "%s", directory.name, directory, reason)
+                    log.error(
+                        "model %r is quarantined, its files in %s are kept as they are: %s",
+                        directory.name,
+                        directory,
+                        reason,
+                    )
                     self.quarantined[directory.name] = reason
                     continue
                 if model is not None:
                     self._models[directory.name] = model
             if self.fsync == "interval":
-                self._syncer = threading.Thread(target=self._sync_loop, name="journal-sync",
-                                                 daemon=True)
+                self._syncer = threading.Thread(
+                    target=self._sync_loop, name="journal-sync", daemon=True
+                )
                 self._syncer.start()
         if self.create_default:
             self.ensure_default()
@@ -220,34 +247,49 @@ class ModelRegistry:
         try:
             config = ShieldConfig.from_stored(store.read_config())
         except Exception as error:
-            raise DamagedModel(f"config.json cannot be read ({type(error).__name__}: "
-                               f"{error})") from error
+            raise DamagedModel(
+                f"config.json cannot be read ({type(error).__name__}: {error})"
+            ) from error
         blob = store.read_snapshot()
         if blob is None:  # a model that never learned, or one stored before snapshots at birth
             shield = Shield(config)
         else:
             shield = Shield.from_snapshot(codec.from_npz(blob))
             if not store.journal_path.exists():
-                raise DamagedModel("journal.log is missing: the steps learned after the "
-                                   f"snapshot (version {shield.counters.model_version}) are "
-                                   "not known")
+                raise DamagedModel(
+                    "journal.log is missing: the steps learned after the "
+                    f"snapshot (version {shield.counters.model_version}) are "
+                    "not known"
+                )
         records, damage = store.scan()
         if damage is not None and not damage.at_tail:
-            raise DamagedModel(f"{damage.describe()}, and readable records follow it: the "
-                               "damage is not at the end of the journal")
+            raise DamagedModel(
+                f"{damage.describe()}, and readable records follow it: the "
+                "damage is not at the end of the journal"
+            )
         model = Model(directory.name, shield, store, keys=KeyWindow(self.idempotency_window))
         replayed = self._replay(model, records)
         if damage is not None:
             kept = store.cut(damage)
-            log.error("model %r repaired: %s; the journal now ends at its last good record "
-                      "(version %d, %d steps replayed), the cut bytes are kept in %s, and a "
-                      "snapshot was taken", directory.name, damage.describe(),
-                      shield.counters.model_version, replayed,
-                      ", ".join(p.name for p in kept) or "no file (nothing was cut)")
+            log.error(
+                "model %r repaired: %s; the journal now ends at its last good record "
+                "(version %d, %d steps replayed), the cut bytes are kept in %s, and a "
+                "snapshot was taken",
+                directory.name,
+                damage.describe(),
+                shield.counters.model_version,
+                replayed,
+                ", ".join(p.name for p in kept) or "no file (nothing was cut)",
+            )
         if damage is not None or blob is None:  # the repair, or the snapshot of its birth
             self._snapshot(model)
-        log.info("model %r: %d states, version %d (%d journaled steps replayed)",
-                 directory.name, shield.n_states, shield.counters.model_version, replayed)
+        log.info(
+            "model %r: %d states, version %d (%d journaled steps replayed)",
+            directory.name,
+            shield.n_states,
+            shield.counters.model_version,
+            replayed,
+        )
         return model
 
     @staticmethod
@@ -264,14 +306,22 @@ class ModelRegistry:
                 continue  # already in the snapshot
             start = record["v"] - len(record["steps"])
             if start != shield.counters.model_version:
-                raise DamagedModel(f"the journal goes on from version {start}, the model is "
-                                   f"at version {shield.counters.model_version} (a snapshot "
-                                   "missing or older than the journal)")
+                raise DamagedModel(
+                    f"the journal goes on from version {start}, the model is "
+                    f"at version {shield.counters.model_version} (a snapshot "
+                    "missing or older than the journal)"
+                )
             for data in record["steps"]:
                 step = Step.from_journal(data)
-                decision = shield.step(step.observation, step.action, stream=step.stream,
-                                       event=step.event, done=step.done,
-                                       applied_action=step.applied_action, shadow=step.shadow)
+                decision = shield.step(
+                    step.observation,
+                    step.action,
+                    stream=step.stream,
+                    event=step.event,
+                    done=step.done,
+                    applied_action=step.applied_action,
+                    shadow=step.shadow,
+                )
                 if step.key is not None:
                     model.keys.remember(step.key, step.fingerprint(), decision)
                 replayed += 1
@@ -295,7 +345,8 @@ class ModelRegistry:
             raise ModelQuarantined(
                 f"model {name!r} was set aside at start-up, its files damaged "
                 f"({self.quarantined[name]}); repair or move its directory and restart",
-                field="name")
+                field="name",
+            )
 
     def create(self, name: str, config: ShieldConfig) -> Model:
         """A new, empty model (its configuration is stored at once)."""
@@ -316,8 +367,7 @@ class ModelRegistry:
     def _new_model(self, name: str, shield: Shield) -> Model:
         return Model(name, shield, self._store(name), keys=KeyWindow(self.idempotency_window))
 
-    def restore(self, name: str, snapshot: dict[str, Any], keys: Sequence[Entry] = ()
-                ) -> Model:
+    def restore(self, name: str, snapshot: dict[str, Any], keys: Sequence[Entry] = ()) -> Model:
         """Create or replace a model from a snapshot (the snapshot is stored at once), with
         the idempotency keys it remembers (a model moved from another shard)."""
         check_name(name)
@@ -343,8 +393,7 @@ class ModelRegistry:
 
     def _check_room(self, name: str) -> None:
         if name not in self._models and len(self._models) >= self.max_models:
-            raise TooManyModels(f"this server holds at most {self.max_models} models",
-                                field="name")
+            raise TooManyModels(f"this server holds at most {self.max_models} models", field="name")
 
     def delete(self, name: str) -> None:
         """Remove a model and its files."""
@@ -382,8 +431,9 @@ class ModelRegistry:
         data = model.shield.snapshot()
         model.store.rotate()
         if len(model.keys):
-            model.store.append({"v": model.shield.counters.model_version,
-                                "w": model.keys.entries()})
+            model.store.append(
+                {"v": model.shield.counters.model_version, "w": model.keys.entries()}
+            )
         model.since_snapshot = 0
         return data
 
@@ -442,8 +492,9 @@ class ModelRegistry:
                 model.snapshotting.release()
         return decision
 
-    def step_many(self, steps: Sequence[tuple[str, Step]],
-                  blocking: bool = True) -> list[Decision] | None:
+    def step_many(
+        self, steps: Sequence[tuple[str, Step]], blocking: bool = True
+    ) -> list[Decision] | None:
         """Steps across models, in order; one bad step (or unknown model) rejects them all.
         A step whose key a model remembers is answered with its first decision, not applied.
 
@@ -459,12 +510,12 @@ class ModelRegistry:
                         return None
                     held.append(models[name])
                     self._check_current(name, models[name])
-                prints = [None if step.key is None else step.fingerprint()
-                          for _, step in steps]
+                prints = [None if step.key is None else step.fingerprint() for _, step in steps]
                 remembered = self._recall(models, steps, prints)
-                inputs = [None if known is not None else _validate(models[name].shield, step, i)
-                          for i, ((name, step), known) in enumerate(zip(steps, remembered,
-                                                                        strict=True))]
+                inputs = [
+                    None if known is not None else _validate(models[name].shield, step, i)
+                    for i, ((name, step), known) in enumerate(zip(steps, remembered, strict=True))
+                ]
                 learned: dict[str, list[Step]] = {}
                 for (name, step), known in zip(steps, remembered, strict=True):
                     if step.learn and known is None:
@@ -472,8 +523,9 @@ class ModelRegistry:
                 for name, group in learned.items():
                     self._journal(models[name], group)
                 decisions = []
-                for (name, step), known, checked, print_ in zip(steps, remembered, inputs,
-                                                                prints, strict=True):
+                for (name, step), known, checked, print_ in zip(
+                    steps, remembered, inputs, prints, strict=True
+                ):
                     if checked is None:
                         assert known is not None
                         decisions.append(known)
@@ -498,8 +550,9 @@ class ModelRegistry:
         return decisions
 
     @staticmethod
-    def _recall(models: dict[str, Model], steps: Sequence[tuple[str, Step]],
-                prints: Sequence[str | None]) -> list[Decision | None]:
+    def _recall(
+        models: dict[str, Model], steps: Sequence[tuple[str, Step]], prints: Sequence[str | None]
+    ) -> list[Decision | None]:
         """Each step's first decision if its model remembers its key, else None; a key named
         twice in one request for one model, or more keys for a model than it remembers, is
         refused."""
@@ -512,8 +565,11 @@ class ModelRegistry:
                 continue
             field = f"steps.{i}.idempotency_key"
             if (name, step.key) in seen:
-                raise KeyReused(f"idempotency key {step.key!r} names step {seen[name, step.key]} "
-                                "of this request already; a key names one step", field=field)
+                raise KeyReused(
+                    f"idempotency key {step.key!r} names step {seen[name, step.key]} "
+                    "of this request already; a key names one step",
+                    field=field,
+                )
             seen[name, step.key] = i
             keyed[name] = keyed.get(name, 0) + 1
             remembered.append(models[name].keys.recall(step.key, print_, field))
@@ -524,8 +580,7 @@ class ModelRegistry:
     def _check_current(self, name: str, model: Model) -> None:
         """Refuse a model that was replaced or deleted while its lock was awaited."""
         if self._models.get(name) is not model:
-            raise UnknownModel(f"model {name!r} was replaced or deleted; send again",
-                               field="name")
+            raise UnknownModel(f"model {name!r} was replaced or deleted; send again", field="name")
 
     def _apply(self, model: Model, step: Step, checked: StepInput) -> Decision:
         """Apply a validated step (the model's lock held): tally its decision, show it to
@@ -540,8 +595,11 @@ class ModelRegistry:
     def _snapshot_due(self, model: Model) -> bool:
         """Whether the model's snapshot is due now; if so, its write lock is taken (else it
         waits for a later step)."""
-        return (model.store is not None and model.since_snapshot >= self.snapshot_every
-                and model.snapshotting.acquire(blocking=False))
+        return (
+            model.store is not None
+            and model.since_snapshot >= self.snapshot_every
+            and model.snapshotting.acquire(blocking=False)
+        )
 
     def watch(self, name: str, watcher: Watcher) -> Callable[[], None]:
         """Call ``watcher`` with every step of a model from now on; returns the unsubscribe."""
@@ -576,10 +634,16 @@ class ModelRegistry:
 def _validate(shield: Shield, step: Step, index: int | None) -> StepInput:
     """The step checked by its model; a refusal names the step's ``index`` in a batch."""
     try:
-        return shield.validate(step.observation, step.action, stream=step.stream,
-                               event=step.event, done=step.done,
-                               applied_action=step.applied_action, learn=step.learn,
-                               shadow=step.shadow)
+        return shield.validate(
+            step.observation,
+            step.action,
+            stream=step.stream,
+            event=step.event,
+            done=step.done,
+            applied_action=step.applied_action,
+            learn=step.learn,
+            shadow=step.shadow,
+        )
     except ShieldError as error:
         if index is not None:
             error.field = f"steps.{index}.{error.field}" if error.field else f"steps.{index}"

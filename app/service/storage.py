@@ -162,12 +162,13 @@ class ModelStore:
                 if record is None:
                     if not line and not whole:
                         break  # the end of the file
-                    later = data[end + 1:].split(b"\n") if whole else []
-                    later += [ln for p in paths[i + 1:] for ln in p.read_bytes().split(b"\n")]
-                    cuts = [(path, start)] + [(p, 0) for p in paths[i + 1:]]
+                    later = data[end + 1 :].split(b"\n") if whole else []
+                    later += [ln for p in paths[i + 1 :] for ln in p.read_bytes().split(b"\n")]
+                    cuts = [(path, start)] + [(p, 0) for p in paths[i + 1 :]]
                     at_tail = not any(_parse(ln) is not None for ln in later)
-                    return records, Damage(path, number, start, len(data) - start,
-                                           at_tail, tuple(cuts))
+                    return records, Damage(
+                        path, number, start, len(data) - start, at_tail, tuple(cuts)
+                    )
                 records.append(record)
                 start = end + 1
         return records, None
@@ -220,8 +221,10 @@ class Damage:
     cuts: tuple[tuple[Path, int], ...]
 
     def describe(self) -> str:
-        return (f"{self.path.name} line {self.line} ({self.size} bytes from offset "
-                f"{self.offset} to the end of the file) is not a whole journal record")
+        return (
+            f"{self.path.name} line {self.line} ({self.size} bytes from offset "
+            f"{self.offset} to the end of the file) is not a whole journal record"
+        )
 
 
 def _parse(line: bytes) -> dict[str, Any] | None:

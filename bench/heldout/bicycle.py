@@ -73,13 +73,16 @@ class Bicycle:
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         asked = min(max(float(np.asarray(action).reshape(-1)[0]), -STEER_MAX), STEER_MAX)
         # the wind: a gust process with a correlation time of 0.5 s
-        self.wind += (-self.wind * DT / 0.5
-                      + GUST * math.sqrt(2.0 * DT / 0.5) * float(self.rng.normal()))
+        self.wind += -self.wind * DT / 0.5 + GUST * math.sqrt(2.0 * DT / 0.5) * float(
+            self.rng.normal()
+        )
         self.steer += (asked - self.steer) * DT / FORK_LAG
         # lean: phi'' = (g/h) sin phi - (v^2/(h b)) delta cos phi + wind
-        accel = (GRAVITY / HEIGHT * math.sin(self.lean)
-                 - SPEED**2 / (HEIGHT * WHEELBASE) * self.steer * math.cos(self.lean)
-                 + self.wind)
+        accel = (
+            GRAVITY / HEIGHT * math.sin(self.lean)
+            - SPEED**2 / (HEIGHT * WHEELBASE) * self.steer * math.cos(self.lean)
+            + self.wind
+        )
         self.rate += accel * DT
         self.lean += self.rate * DT
         self.heading += SPEED * self.steer / WHEELBASE * DT  # psi' = v delta / b
@@ -89,8 +92,13 @@ class Bicycle:
             event = "fall_right" if self.lean > 0 else "fall_left"
         elif abs(self.offset) > EDGE:
             event = "off_right" if self.offset > 0 else "off_left"
-        return (self._obs(), 0.0, event is not None, False,
-                {"event": event, "task": abs(self.offset)})
+        return (
+            self._obs(),
+            0.0,
+            event is not None,
+            False,
+            {"event": event, "task": abs(self.offset)},
+        )
 
     def _obs(self) -> np.ndarray:
         return np.array([self.lean, self.rate, self.heading, self.offset])
@@ -135,26 +143,43 @@ class Rider:
 # takes, the steering's range in 20 bins, and each failure with the direction of steering
 # that moves away from it; the second adds where each failure lies.
 SPACES = SimpleNamespace(
-    observation_space=Box(low=np.array([-FALL, -3.0, -0.6, -EDGE]),
-                          high=np.array([FALL, 3.0, 0.6, EDGE]), dtype=np.float64),
+    observation_space=Box(
+        low=np.array([-FALL, -3.0, -0.6, -EDGE]),
+        high=np.array([FALL, 3.0, 0.6, EDGE]),
+        dtype=np.float64,
+    ),
     action_space=Box(low=-STEER_MAX, high=STEER_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "fall_right": "increase", "fall_left": "decrease",
-    "off_right": "decrease", "off_left": "increase",
-})
-BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "fall_right": ("increase", Bound("x0", above=FALL)),
-    "fall_left": ("decrease", Bound("x0", below=-FALL)),
-    "off_right": ("decrease", Bound("x3", above=EDGE)),
-    "off_left": ("increase", Bound("x3", below=-EDGE)),
-})
+CONFIG: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "fall_right": "increase",
+        "fall_left": "decrease",
+        "off_right": "decrease",
+        "off_left": "increase",
+    },
+)
+BOUNDED: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "fall_right": ("increase", Bound("x0", above=FALL)),
+        "fall_left": ("decrease", Bound("x0", below=-FALL)),
+        "off_right": ("decrease", Bound("x3", above=EDGE)),
+        "off_left": ("increase", Bound("x3", below=-EDGE)),
+    },
+)
 
 
 def _world(name: str, config: ShieldConfig) -> World:
-    return World(name=name, make=lambda seed: Bicycle(), controller=Rider, config=config,
-                 event=lambda obs, info: info["event"],
-                 shield_observation=lambda obs: [float(v) for v in obs], max_steps=MAX_STEPS)
+    return World(
+        name=name,
+        make=lambda seed: Bicycle(),
+        controller=Rider,
+        config=config,
+        event=lambda obs, info: info["event"],
+        shield_observation=lambda obs: [float(v) for v in obs],
+        max_steps=MAX_STEPS,
+    )
 
 
 WORLD = _world("bicycle", CONFIG)

@@ -84,8 +84,11 @@ class Greenhouse:
     def _weather(self) -> None:
         # outside: coldest at 3:00, warmest at 15:00, plus a drifting front
         self.front += float(self.rng.normal(0.0, 0.15))
-        self.outside = (self.mean_out + self.front
-                        - self.swing * math.cos(2.0 * math.pi * (self.hour - 3.0) / 24.0))
+        self.outside = (
+            self.mean_out
+            + self.front
+            - self.swing * math.cos(2.0 * math.pi * (self.hour - 3.0) / 24.0)
+        )
         self.cloud = min(max(self.cloud + float(self.rng.normal(0.0, 0.08)), 0.3), 1.0)
         daylight = math.sin(math.pi * (self.hour % 24.0 - 7.0) / 12.0)
         self.sun = max(0.0, daylight) * self.clear * self.cloud
@@ -98,16 +101,25 @@ class Greenhouse:
             to_air = self.pipes - self.air
             self.pipes += (PIPE_GAIN * power - to_air) / TAU_PIPES * h
             # the air: d air/dt = (pipes - air + S sun - (air - out) - s (air - soil)) / tau_air
-            gain = (to_air + SUN_GAIN * self.sun - (self.air - self.outside)
-                    - SOIL_SHARE * (self.air - self.soil))
+            gain = (
+                to_air
+                + SUN_GAIN * self.sun
+                - (self.air - self.outside)
+                - SOIL_SHARE * (self.air - self.soil)
+            )
             self.air += gain / TAU_AIR * h
             # the soil: d soil/dt = (air - soil) / tau_soil
             self.soil += (self.air - self.soil) / TAU_SOIL * h
         self.hour += DT
         self._weather()
         event = "overheat" if self.air > OVERHEAT else "chill" if self.air < CHILL else None
-        return (self._obs(), 0.0, event is not None, False,
-                {"event": event, "task": abs(self.air - SET_POINT)})
+        return (
+            self._obs(),
+            0.0,
+            event is not None,
+            False,
+            {"event": event, "task": abs(self.air - SET_POINT)},
+        )
 
     def _obs(self) -> np.ndarray:
         return np.array([self.air, self.pipes, self.outside, self.sun])
@@ -139,22 +151,33 @@ class HeatingCurve:
 # takes, the boiler's range in 20 bins, and each failure with the direction of power that
 # moves away from it; the second adds where each failure lies.
 SPACES = SimpleNamespace(
-    observation_space=Box(low=np.array([-5.0, -5.0, -20.0, 0.0]),
-                          high=np.array([40.0, 90.0, 20.0, 1.0]), dtype=np.float64),
+    observation_space=Box(
+        low=np.array([-5.0, -5.0, -20.0, 0.0]),
+        high=np.array([40.0, 90.0, 20.0, 1.0]),
+        dtype=np.float64,
+    ),
     action_space=Box(low=0.0, high=POWER_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(
-    SPACES, {"overheat": "decrease", "chill": "increase"})  # type: ignore[arg-type]
-BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "overheat": ("decrease", Bound("x0", above=OVERHEAT)),
-    "chill": ("increase", Bound("x0", below=CHILL)),
-})
+CONFIG: ShieldConfig = config_for(SPACES, {"overheat": "decrease", "chill": "increase"})  # type: ignore[arg-type]
+BOUNDED: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "overheat": ("decrease", Bound("x0", above=OVERHEAT)),
+        "chill": ("increase", Bound("x0", below=CHILL)),
+    },
+)
 
 
 def _world(name: str, config: ShieldConfig) -> World:
-    return World(name=name, make=lambda seed: Greenhouse(), controller=HeatingCurve,
-                 config=config, event=lambda obs, info: info["event"],
-                 shield_observation=lambda obs: [float(v) for v in obs], max_steps=MAX_STEPS)
+    return World(
+        name=name,
+        make=lambda seed: Greenhouse(),
+        controller=HeatingCurve,
+        config=config,
+        event=lambda obs, info: info["event"],
+        shield_observation=lambda obs: [float(v) for v in obs],
+        max_steps=MAX_STEPS,
+    )
 
 
 WORLD = _world("greenhouse", CONFIG)

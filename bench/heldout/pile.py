@@ -88,10 +88,16 @@ class Pile:
         if self.asked_left == 0:
             self.asked = float(self.rng.uniform(*ASKED))
             self.asked_left = int(self.rng.integers(60, 181))
-        event = ("runaway" if self.power > RUNAWAY
-                 else "extinction" if self.power < EXTINCTION else None)
-        return (self._obs(), 0.0, event is not None, False,
-                {"event": event, "task": abs(self.power - self.asked)})
+        event = (
+            "runaway" if self.power > RUNAWAY else "extinction" if self.power < EXTINCTION else None
+        )
+        return (
+            self._obs(),
+            0.0,
+            event is not None,
+            False,
+            {"event": event, "task": abs(self.power - self.asked)},
+        )
 
     def _obs(self) -> np.ndarray:
         return np.array([self.power, self.fuel, self.inlet, self.asked])
@@ -115,8 +121,9 @@ class Regulator:
     def __call__(self, obs: np.ndarray) -> float:
         power, _, _, asked = (float(v) for v in obs)
         # the chamber: d read/dt = (power - read) / lag
-        self.read = (power if self.read is None
-                     else self.read + (power - self.read) * DT / CHAMBER_LAG)
+        self.read = (
+            power if self.read is None else self.read + (power - self.read) * DT / CHAMBER_LAG
+        )
         gap = asked - self.read
         self.integral += gap * DT
         return min(max(self.kp * gap + self.ki * self.integral, -RODS_MAX), RODS_MAX)
@@ -126,22 +133,33 @@ class Regulator:
 # takes, the rods' range in 20 bins, and each failure with the direction of reactivity that
 # moves away from it; the second adds where each failure lies.
 SPACES = SimpleNamespace(
-    observation_space=Box(low=np.array([0.0, 250.0, 260.0, 0.0]),
-                          high=np.array([2.0, 360.0, 300.0, 1.5]), dtype=np.float64),
+    observation_space=Box(
+        low=np.array([0.0, 250.0, 260.0, 0.0]),
+        high=np.array([2.0, 360.0, 300.0, 1.5]),
+        dtype=np.float64,
+    ),
     action_space=Box(low=-RODS_MAX, high=RODS_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(
-    SPACES, {"runaway": "decrease", "extinction": "increase"})  # type: ignore[arg-type]
-BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "runaway": ("decrease", Bound("x0", above=RUNAWAY)),
-    "extinction": ("increase", Bound("x0", below=EXTINCTION)),
-})
+CONFIG: ShieldConfig = config_for(SPACES, {"runaway": "decrease", "extinction": "increase"})  # type: ignore[arg-type]
+BOUNDED: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "runaway": ("decrease", Bound("x0", above=RUNAWAY)),
+        "extinction": ("increase", Bound("x0", below=EXTINCTION)),
+    },
+)
 
 
 def _world(name: str, config: ShieldConfig) -> World:
-    return World(name=name, make=lambda seed: Pile(), controller=Regulator, config=config,
-                 event=lambda obs, info: info["event"],
-                 shield_observation=lambda obs: [float(v) for v in obs], max_steps=MAX_STEPS)
+    return World(
+        name=name,
+        make=lambda seed: Pile(),
+        controller=Regulator,
+        config=config,
+        event=lambda obs, info: info["event"],
+        shield_observation=lambda obs: [float(v) for v in obs],
+        max_steps=MAX_STEPS,
+    )
 
 
 WORLD = _world("pile", CONFIG)

@@ -25,8 +25,9 @@ def world(name: str, bounded: bool = False) -> World:
     """The held-out world ``name`` of the second set, with a bound per failure when
     ``bounded``."""
     if name not in NAMES:
-        raise ValueError(f"no held-out world {name!r} in the second set; there are "
-                         f"{', '.join(NAMES)}")
+        raise ValueError(
+            f"no held-out world {name!r} in the second set; there are {', '.join(NAMES)}"
+        )
     module = importlib.import_module(f"bench.heldout2.{name}")
     found: World = module.WORLD_BOUNDED if bounded else module.WORLD
     return found

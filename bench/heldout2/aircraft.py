@@ -105,8 +105,13 @@ class Aircraft:
         for _ in range(3):
             length = float(self.rng.uniform(*HILL_LENGTH))  # [m]
             slope = float(self.rng.uniform(0.0, HILL_SLOPE))  # the wave's steepest slope
-            self.hills.append((slope * length / (2.0 * math.pi), 2.0 * math.pi / length,
-                               float(self.rng.uniform(0.0, 2.0 * math.pi))))
+            self.hills.append(
+                (
+                    slope * length / (2.0 * math.pi),
+                    2.0 * math.pi / length,
+                    float(self.rng.uniform(0.0, 2.0 * math.pi)),
+                )
+            )
         self.distance = 0.0
         self.height = SURVEY + float(self.rng.uniform(-5.0, 5.0))
         self.path = float(self.rng.uniform(-0.05, 0.05))
@@ -125,14 +130,18 @@ class Aircraft:
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         asked = min(max(float(np.asarray(action).reshape(-1)[0]), -ELEVATOR_MAX), ELEVATOR_MAX)
-        self.wind += (-self.wind * DT / GUST_TIME
-                      + GUST * math.sqrt(2.0 * DT / GUST_TIME) * float(self.rng.normal()))
+        self.wind += -self.wind * DT / GUST_TIME + GUST * math.sqrt(2.0 * DT / GUST_TIME) * float(
+            self.rng.normal()
+        )
         h = DT / SUBSTEPS
         for _ in range(SUBSTEPS):
             self.elevator += (asked - self.elevator) * h / SERVO_LAG
             alpha = self.incidence()
-            accel = (self.stiffness * (alpha - TRIM) + DAMPING * self.rate
-                     + ELEVATOR_POWER * self.elevator)
+            accel = (
+                self.stiffness * (alpha - TRIM)
+                + DAMPING * self.rate
+                + ELEVATOR_POWER * self.elevator
+            )
             lift = LIFT_SLOPE * alpha + LIFT_ELEVATOR * self.elevator
             climb = SPEED * math.sin(self.path)
             self.rate += accel * h
@@ -141,11 +150,24 @@ class Aircraft:
             self.height += (climb - SPEED * math.cos(self.path) * math.tan(self.slope())) * h
             self.distance += SPEED * math.cos(self.path) * h
         alpha = self.incidence()
-        event = ("stall" if alpha > STALL else "negative_stall" if alpha < NEGATIVE_STALL
-                 else "ground" if self.height < GROUND
-                 else "ceiling" if self.height > CEILING else None)
-        return (self._obs(), 0.0, event is not None, False,
-                {"event": event, "task": abs(self.height - SURVEY)})
+        event = (
+            "stall"
+            if alpha > STALL
+            else "negative_stall"
+            if alpha < NEGATIVE_STALL
+            else "ground"
+            if self.height < GROUND
+            else "ceiling"
+            if self.height > CEILING
+            else None
+        )
+        return (
+            self._obs(),
+            0.0,
+            event is not None,
+            False,
+            {"event": event, "task": abs(self.height - SURVEY)},
+        )
 
     def _obs(self) -> np.ndarray:
         return np.array([self.incidence(), self.rate, SPEED * math.sin(self.path), self.height])
@@ -174,40 +196,58 @@ class Autopilot:
     def __call__(self, obs: np.ndarray) -> float:
         alpha, rate, climb, height = (float(v) for v in obs)
         # the radar altimeter: d read/dt = (height - read) / lag
-        self.read = (height if self.read is None
-                     else self.read + (height - self.read) * DT / ALTIMETER_LAG)
-        asked_climb = min(max(self.k_height * (SURVEY - self.read), -self.climb_max),
-                          self.climb_max)
+        self.read = (
+            height if self.read is None else self.read + (height - self.read) * DT / ALTIMETER_LAG
+        )
+        asked_climb = min(
+            max(self.k_height * (SURVEY - self.read), -self.climb_max), self.climb_max
+        )
         asked_alpha = TRIM + self.k_climb * (asked_climb - climb) / SPEED
         elevator = self.k_pitch * (asked_alpha - alpha) - self.k_rate * rate
         return min(max(elevator, -ELEVATOR_MAX), ELEVATOR_MAX)
-
 
 
 # What a new user writes (client.shield.config_for): the ranges the observation usually
 # takes, the elevator's range in 20 bins, and each failure with the direction of the elevator
 # that moves away from it; the second adds where each failure lies.
 SPACES = SimpleNamespace(
-    observation_space=Box(low=np.array([NEGATIVE_STALL, -1.5, -8.0, 0.0]),
-                          high=np.array([STALL, 1.5, 8.0, CEILING]), dtype=np.float64),
+    observation_space=Box(
+        low=np.array([NEGATIVE_STALL, -1.5, -8.0, 0.0]),
+        high=np.array([STALL, 1.5, 8.0, CEILING]),
+        dtype=np.float64,
+    ),
     action_space=Box(low=-ELEVATOR_MAX, high=ELEVATOR_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "stall": "decrease", "negative_stall": "increase",
-    "ground": "increase", "ceiling": "decrease",
-})
-BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "stall": ("decrease", Bound("x0", above=STALL)),
-    "negative_stall": ("increase", Bound("x0", below=NEGATIVE_STALL)),
-    "ground": ("increase", Bound("x3", below=GROUND)),
-    "ceiling": ("decrease", Bound("x3", above=CEILING)),
-})
+CONFIG: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "stall": "decrease",
+        "negative_stall": "increase",
+        "ground": "increase",
+        "ceiling": "decrease",
+    },
+)
+BOUNDED: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "stall": ("decrease", Bound("x0", above=STALL)),
+        "negative_stall": ("increase", Bound("x0", below=NEGATIVE_STALL)),
+        "ground": ("increase", Bound("x3", below=GROUND)),
+        "ceiling": ("decrease", Bound("x3", above=CEILING)),
+    },
+)
 
 
 def _world(name: str, config: ShieldConfig) -> World:
-    return World(name=name, make=lambda seed: Aircraft(), controller=Autopilot, config=config,
-                 event=lambda obs, info: info["event"],
-                 shield_observation=lambda obs: [float(v) for v in obs], max_steps=MAX_STEPS)
+    return World(
+        name=name,
+        make=lambda seed: Aircraft(),
+        controller=Autopilot,
+        config=config,
+        event=lambda obs, info: info["event"],
+        shield_observation=lambda obs: [float(v) for v in obs],
+        max_steps=MAX_STEPS,
+    )
 
 
 WORLD = _world("aircraft", CONFIG)

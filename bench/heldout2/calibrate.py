@@ -33,15 +33,23 @@ def main() -> None:
     parser.add_argument("--warmup", type=int, default=50)
     args = parser.parse_args()
     seeds = seed_list(args.seeds)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True, check=False).stdout.strip() or "unknown"
-    print(f"Controller alone (config=None), {args.episodes} episodes a seed; "
-          f"episodes 1-{args.warmup} and {args.warmup + 1}-{args.episodes} counted apart. "
-          f"Commit {commit}, {platform.processor() or platform.machine()}, "
-          f"Python {platform.python_version()}.\n")
-    print(f"| world | seed | failures 1-{args.warmup} | failures {args.warmup + 1}-"
-          f"{args.episodes} | rate {args.warmup + 1}-{args.episodes} | rate 1-{args.episodes} | "
-          f"by kind, {args.warmup + 1}-{args.episodes} |")
+    commit = (
+        subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
+        ).stdout.strip()
+        or "unknown"
+    )
+    print(
+        f"Controller alone (config=None), {args.episodes} episodes a seed; "
+        f"episodes 1-{args.warmup} and {args.warmup + 1}-{args.episodes} counted apart. "
+        f"Commit {commit}, {platform.processor() or platform.machine()}, "
+        f"Python {platform.python_version()}.\n"
+    )
+    print(
+        f"| world | seed | failures 1-{args.warmup} | failures {args.warmup + 1}-"
+        f"{args.episodes} | rate {args.warmup + 1}-{args.episodes} | rate 1-{args.episodes} | "
+        f"by kind, {args.warmup + 1}-{args.episodes} |"
+    )
     print("|---|---|---|---|---|---|---|")
     for name in args.worlds.split(","):
         chosen = world(name)
@@ -53,15 +61,21 @@ def main() -> None:
             early_total += early["total"]
             late_total += late["total"]
             kinds.update(late["failures"])
-            print(f"| {name} | {seed} | {early['total']} | {late['total']} | "
-                  f"{late['total'] / late['episodes']:.1%} | "
-                  f"{(early['total'] + late['total']) / args.episodes:.1%} | "
-                  f"{kinds_text(late['failures'])} |", flush=True)
+            print(
+                f"| {name} | {seed} | {early['total']} | {late['total']} | "
+                f"{late['total'] / late['episodes']:.1%} | "
+                f"{(early['total'] + late['total']) / args.episodes:.1%} | "
+                f"{kinds_text(late['failures'])} |",
+                flush=True,
+            )
         episodes = (args.episodes - args.warmup) * len(seeds)
-        print(f"| **{name}** | all | {early_total} | {late_total} | "
-              f"**{late_total / episodes:.1%}** | "
-              f"**{(early_total + late_total) / (args.episodes * len(seeds)):.1%}** | "
-              f"{kinds_text(dict(kinds))} |", flush=True)
+        print(
+            f"| **{name}** | all | {early_total} | {late_total} | "
+            f"**{late_total / episodes:.1%}** | "
+            f"**{(early_total + late_total) / (args.episodes * len(seeds)):.1%}** | "
+            f"{kinds_text(dict(kinds))} |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

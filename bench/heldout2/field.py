@@ -130,8 +130,9 @@ class Field:
         h = DT / SUBSTEPS
         for _ in range(SUBSTEPS):
             top, root, sub = self.top / TOP, self.root / ROOT, self.sub / SUB  # contents [1]
-            evaporation = EVAPORATION * demand * min(max((top - DRY) / (FIELD_CAPACITY - DRY),
-                                                         0.0), 1.0)
+            evaporation = (
+                EVAPORATION * demand * min(max((top - DRY) / (FIELD_CAPACITY - DRY), 0.0), 1.0)
+            )
             stress = min(max((root - STRESS_TO) / (STRESS_FROM - STRESS_TO), 0.0), 1.0)
             transpiration = demand * stress
             room_root = max(SATURATED - root, 0.0) / (SATURATED - FIELD_CAPACITY)
@@ -139,8 +140,7 @@ class Field:
             # water drains from a layer above field capacity, as fast as the layer below
             # has room for it; the subsoil's room runs out first, over the clay pan
             down_top = max(self.top - FIELD_CAPACITY * TOP, 0.0) / TAU_TOP * min(room_root, 1.0)
-            down_root = (max(self.root - FIELD_CAPACITY * ROOT, 0.0) / TAU_ROOT
-                         * min(room_sub, 1.0))
+            down_root = max(self.root - FIELD_CAPACITY * ROOT, 0.0) / TAU_ROOT * min(room_sub, 1.0)
             out_sub = max(self.sub - FIELD_CAPACITY * SUB, 0.0) / TAU_SUB
             self.top += (valve + self.rain - evaporation - down_top) * h
             self.top = min(self.top, SATURATED * TOP)  # more runs off
@@ -149,10 +149,14 @@ class Field:
         self.hour += DT
         self._weather()
         root = self.root / ROOT
-        event = ("waterlogged" if root > WATERLOGGED
-                 else "wilting" if root < WILTING else None)
-        return (self._obs(), 0.0, event is not None, False,
-                {"event": event, "task": abs(root - TARGET)})
+        event = "waterlogged" if root > WATERLOGGED else "wilting" if root < WILTING else None
+        return (
+            self._obs(),
+            0.0,
+            event is not None,
+            False,
+            {"event": event, "task": abs(root - TARGET)},
+        )
 
     def _obs(self) -> np.ndarray:
         return np.array([self.root / ROOT, self.top / TOP, self.sub / SUB, self.demand()])
@@ -194,22 +198,33 @@ class Irrigator:
 # takes, the drip lines' range in 20 bins, and each failure with the direction of watering
 # that moves away from it; the second adds where each failure lies.
 SPACES = SimpleNamespace(
-    observation_space=Box(low=np.array([0.1, 0.05, 0.25, 0.0]),
-                          high=np.array([0.45, 0.45, 0.45, 1.2]), dtype=np.float64),
+    observation_space=Box(
+        low=np.array([0.1, 0.05, 0.25, 0.0]),
+        high=np.array([0.45, 0.45, 0.45, 1.2]),
+        dtype=np.float64,
+    ),
     action_space=Box(low=0.0, high=VALVE_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(
-    SPACES, {"waterlogged": "decrease", "wilting": "increase"})  # type: ignore[arg-type]
-BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "waterlogged": ("decrease", Bound("x0", above=WATERLOGGED)),
-    "wilting": ("increase", Bound("x0", below=WILTING)),
-})
+CONFIG: ShieldConfig = config_for(SPACES, {"waterlogged": "decrease", "wilting": "increase"})  # type: ignore[arg-type]
+BOUNDED: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "waterlogged": ("decrease", Bound("x0", above=WATERLOGGED)),
+        "wilting": ("increase", Bound("x0", below=WILTING)),
+    },
+)
 
 
 def _world(name: str, config: ShieldConfig) -> World:
-    return World(name=name, make=lambda seed: Field(), controller=Irrigator, config=config,
-                 event=lambda obs, info: info["event"],
-                 shield_observation=lambda obs: [float(v) for v in obs], max_steps=MAX_STEPS)
+    return World(
+        name=name,
+        make=lambda seed: Field(),
+        controller=Irrigator,
+        config=config,
+        event=lambda obs, info: info["event"],
+        shield_observation=lambda obs: [float(v) for v in obs],
+        max_steps=MAX_STEPS,
+    )
 
 
 WORLD = _world("field", CONFIG)

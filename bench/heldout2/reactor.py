@@ -116,26 +116,37 @@ class Reactor:
             reacted = rate(self.temp) * self.conc  # [mol/(L min)]
             through_wall = UA * (self.temp - self.jacket)  # [J/min]
             self.conc += (FEED_FLOW / VOLUME * (self.feed_conc - self.conc) - reacted) * h
-            self.temp += (FEED_FLOW / VOLUME * (self.feed_temp - self.temp)
-                          + HEAT / RHO_C * reacted - through_wall / (RHO_C * VOLUME)) * h
-            self.jacket += (coolant / JACKET * (self.coolant_in - self.jacket)
-                            + through_wall / (WATER_RHO_C * JACKET)) * h
+            self.temp += (
+                FEED_FLOW / VOLUME * (self.feed_temp - self.temp)
+                + HEAT / RHO_C * reacted
+                - through_wall / (RHO_C * VOLUME)
+            ) * h
+            self.jacket += (
+                coolant / JACKET * (self.coolant_in - self.jacket)
+                + through_wall / (WATER_RHO_C * JACKET)
+            ) * h
         # the feed and the cooling water wander about their design values
-        self.feed_conc += (0.05 * (FEED_CONC - self.feed_conc) * DT
-                           + 0.002 * float(self.rng.normal()))
+        self.feed_conc += 0.05 * (FEED_CONC - self.feed_conc) * DT + 0.002 * float(
+            self.rng.normal()
+        )
         self.feed_temp += 0.05 * (FEED_TEMP - self.feed_temp) * DT + 0.1 * float(self.rng.normal())
-        self.coolant_in += (0.05 * (COOLANT_IN - self.coolant_in) * DT
-                            + 0.1 * float(self.rng.normal()))
+        self.coolant_in += 0.05 * (COOLANT_IN - self.coolant_in) * DT + 0.1 * float(
+            self.rng.normal()
+        )
         self.set_left -= 1
         if self.set_left == 0:
             self.target = float(self.rng.uniform(*SET_POINTS))
             self.set_left = int(self.rng.integers(*SET_EVERY))
         ramp = SET_RAMP * DT
         self.set_point += min(max(self.target - self.set_point, -ramp), ramp)
-        event = ("runaway" if self.temp > RUNAWAY
-                 else "quench" if self.temp < QUENCH else None)
-        return (self._obs(), 0.0, event is not None, False,
-                {"event": event, "task": abs(self.temp - self.set_point)})
+        event = "runaway" if self.temp > RUNAWAY else "quench" if self.temp < QUENCH else None
+        return (
+            self._obs(),
+            0.0,
+            event is not None,
+            False,
+            {"event": event, "task": abs(self.temp - self.set_point)},
+        )
 
     def _obs(self) -> np.ndarray:
         return np.array([self.temp, self.jacket, self.conc, self.set_point])
@@ -173,27 +184,37 @@ class Regulator:
         return self.valve
 
 
-
 # What a new user writes (client.shield.config_for): the ranges the observation usually
 # takes, the coolant's range in 20 bins, and each failure with the direction of coolant that
 # moves away from it; the second adds where each failure lies.
 SPACES = SimpleNamespace(
-    observation_space=Box(low=np.array([QUENCH, 285.0, 0.5, SET_POINTS[0]]),
-                          high=np.array([RUNAWAY, 360.0, 1.5, SET_POINTS[1]]), dtype=np.float64),
+    observation_space=Box(
+        low=np.array([QUENCH, 285.0, 0.5, SET_POINTS[0]]),
+        high=np.array([RUNAWAY, 360.0, 1.5, SET_POINTS[1]]),
+        dtype=np.float64,
+    ),
     action_space=Box(low=0.0, high=FLOW_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(
-    SPACES, {"runaway": "increase", "quench": "decrease"})  # type: ignore[arg-type]
-BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "runaway": ("increase", Bound("x0", above=RUNAWAY)),
-    "quench": ("decrease", Bound("x0", below=QUENCH)),
-})
+CONFIG: ShieldConfig = config_for(SPACES, {"runaway": "increase", "quench": "decrease"})  # type: ignore[arg-type]
+BOUNDED: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "runaway": ("increase", Bound("x0", above=RUNAWAY)),
+        "quench": ("decrease", Bound("x0", below=QUENCH)),
+    },
+)
 
 
 def _world(name: str, config: ShieldConfig) -> World:
-    return World(name=name, make=lambda seed: Reactor(), controller=Regulator, config=config,
-                 event=lambda obs, info: info["event"],
-                 shield_observation=lambda obs: [float(v) for v in obs], max_steps=MAX_STEPS)
+    return World(
+        name=name,
+        make=lambda seed: Reactor(),
+        controller=Regulator,
+        config=config,
+        event=lambda obs, info: info["event"],
+        shield_observation=lambda obs: [float(v) for v in obs],
+        max_steps=MAX_STEPS,
+    )
 
 
 WORLD = _world("reactor", CONFIG)

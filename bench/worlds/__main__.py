@@ -36,7 +36,8 @@ def world_named(name: str) -> World:
             base = name.removeprefix(prefix)
             try:
                 found: World = importlib.import_module(package).world(
-                    base.removesuffix("_bounded"), base.endswith("_bounded"))
+                    base.removesuffix("_bounded"), base.endswith("_bounded")
+                )
             except ValueError as error:
                 raise SystemExit(str(error)) from None
             return found
@@ -84,16 +85,24 @@ def main() -> None:
     for name in names:
         world = world_named(name)
         config = merged(world.config, overrides)
-        result = compare(dataclasses.replace(world, config=config), seeds, args.episodes,
-                         args.warmup)
+        result = compare(
+            dataclasses.replace(world, config=config), seeds, args.episodes, args.warmup
+        )
         print(summary_line(result), flush=True)
         results.append(result)
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"overrides": overrides, "machine": platform.processor()
-                                        or platform.machine(),
-                                        "core": compiled.version(),
-                                        "results": results}, indent=1))
+        args.out.write_text(
+            json.dumps(
+                {
+                    "overrides": overrides,
+                    "machine": platform.processor() or platform.machine(),
+                    "core": compiled.version(),
+                    "results": results,
+                },
+                indent=1,
+            )
+        )
 
 
 if __name__ == "__main__":

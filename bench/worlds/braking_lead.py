@@ -80,15 +80,24 @@ class LateController:
 
 
 CONFIG = ShieldConfig(
-    observation=ObservationSpec(names=("gap", "v_ego", "v_lead"), low=(0.0, 0.0, 0.0),
-                                high=(150.0, 35.0, 35.0), knee=()),
+    observation=ObservationSpec(
+        names=("gap", "v_ego", "v_lead"), low=(0.0, 0.0, 0.0), high=(150.0, 35.0, 35.0), knee=()
+    ),
     action=ActionSpec(low=A_LOW, high=A_HIGH, step=0.5),
     # the collision's bound declared, as the car-following default does (and not the lost
     # lead's, as the default does not bound falling behind)
-    criteria=(Criterion("collision", "decrease", Bound("gap", below=0.0)),
-              Criterion("lost", "increase")),
+    criteria=(
+        Criterion("collision", "decrease", Bound("gap", below=0.0)),
+        Criterion("lost", "increase"),
+    ),
 )
 
-WORLD = World(name="braking-lead", make=lambda seed: BrakingLead(), controller=LateController,
-              config=CONFIG, event=lambda obs, info: info["event"],
-              shield_observation=lambda obs: [float(v) for v in obs], max_steps=600)
+WORLD = World(
+    name="braking-lead",
+    make=lambda seed: BrakingLead(),
+    controller=LateController,
+    config=CONFIG,
+    event=lambda obs, info: info["event"],
+    shield_observation=lambda obs: [float(v) for v in obs],
+    max_steps=600,
+)

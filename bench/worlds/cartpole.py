@@ -106,9 +106,10 @@ class CartPole:
         for _ in range(SUBSTEPS):
             self.force += (asked - self.force) * min(h / MOTOR_LAG, 1.0)
             sin, cos = math.sin(self.theta), math.cos(self.theta)
-            push = (self.force + POLE * HALF_LENGTH * self.omega ** 2 * sin) / total
-            alpha = ((GRAVITY * sin - cos * push)
-                     / (HALF_LENGTH * (4.0 / 3.0 - POLE * cos ** 2 / total)))
+            push = (self.force + POLE * HALF_LENGTH * self.omega**2 * sin) / total
+            alpha = (GRAVITY * sin - cos * push) / (
+                HALF_LENGTH * (4.0 / 3.0 - POLE * cos**2 / total)
+            )
             accel = push - POLE * HALF_LENGTH * alpha * cos / total
             self.v += accel * h
             self.x += self.v * h
@@ -119,10 +120,24 @@ class CartPole:
         self.target_left -= 1
         if self.target_left == 0:
             self._new_target()
-        event = ("fall_right" if self.theta > FALL else "fall_left" if self.theta < -FALL
-                 else "off_right" if self.x > EDGE else "off_left" if self.x < -EDGE else None)
-        return (self._obs(), 0.0, event is not None, False,
-                {"event": event, "task": abs(self.x - self.target)})
+        event = (
+            "fall_right"
+            if self.theta > FALL
+            else "fall_left"
+            if self.theta < -FALL
+            else "off_right"
+            if self.x > EDGE
+            else "off_left"
+            if self.x < -EDGE
+            else None
+        )
+        return (
+            self._obs(),
+            0.0,
+            event is not None,
+            False,
+            {"event": event, "task": abs(self.x - self.target)},
+        )
 
     def _obs(self) -> np.ndarray:
         return np.array([self.x, self.v, self.theta, self.omega, self.target])
@@ -145,8 +160,7 @@ class Balancer:
         self.angle = float(np.exp(self.rng.uniform(np.log(0.6), np.log(2.0))))
         self.position = float(np.exp(self.rng.uniform(np.log(0.3), np.log(1.8))))
         k_a, k_w, k_x, k_v = DESIGN
-        self.gains = (self.angle * k_a, self.angle * k_w, self.position * k_x,
-                      self.position * k_v)
+        self.gains = (self.angle * k_a, self.angle * k_w, self.position * k_x, self.position * k_v)
         self.tilt = float(self.rng.uniform(-TILT, TILT))
         self.seen = deque(maxlen=int(self.rng.integers(1, 4)) + 1)
 
@@ -163,20 +177,31 @@ class Balancer:
 # takes, the force's range in 20 bins, and each failure with the direction of force that
 # moves away from it; the second adds where each failure lies.
 SPACES = SimpleNamespace(
-    observation_space=Box(low=np.array([-EDGE, -2.0, -FALL, -2.0, -TARGETS]),
-                          high=np.array([EDGE, 2.0, FALL, 2.0, TARGETS]), dtype=np.float64),
+    observation_space=Box(
+        low=np.array([-EDGE, -2.0, -FALL, -2.0, -TARGETS]),
+        high=np.array([EDGE, 2.0, FALL, 2.0, TARGETS]),
+        dtype=np.float64,
+    ),
     action_space=Box(low=-FORCE_MAX, high=FORCE_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "fall_right": "increase", "fall_left": "decrease",
-    "off_right": "decrease", "off_left": "increase",
-})
-BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "fall_right": ("increase", Bound("x2", above=FALL)),
-    "fall_left": ("decrease", Bound("x2", below=-FALL)),
-    "off_right": ("decrease", Bound("x0", above=EDGE)),
-    "off_left": ("increase", Bound("x0", below=-EDGE)),
-})
+CONFIG: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "fall_right": "increase",
+        "fall_left": "decrease",
+        "off_right": "decrease",
+        "off_left": "increase",
+    },
+)
+BOUNDED: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "fall_right": ("increase", Bound("x2", above=FALL)),
+        "fall_left": ("decrease", Bound("x2", below=-FALL)),
+        "off_right": ("decrease", Bound("x0", above=EDGE)),
+        "off_left": ("increase", Bound("x0", below=-EDGE)),
+    },
+)
 
 
 WORLD = plain_world("tuning-cartpole", CartPole, Balancer, CONFIG, MAX_STEPS)

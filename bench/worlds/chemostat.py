@@ -70,7 +70,7 @@ PROBE_LAG = 30.0 / 60.0  # [h] the sampling loop
 def growth(sugar: float, biomass: float, top: float = MU_MAX) -> float:
     """The specific growth rate [1/h]: Monod on the sugar times a Hill term of order 2 on the
     biomass (the cooperation)."""
-    return top * sugar / (K_SUGAR + sugar) * biomass ** 2 / (K_ALLEE ** 2 + biomass ** 2)
+    return top * sugar / (K_SUGAR + sugar) * biomass**2 / (K_ALLEE**2 + biomass**2)
 
 
 class Chemostat:
@@ -107,10 +107,14 @@ class Chemostat:
         if self.asked_left == 0:
             self.asked = float(self.rng.uniform(*ASKED))
             self.asked_left = int(self.rng.integers(*ASKED_EVERY))
-        event = ("bloom" if self.biomass > BLOOM
-                 else "washout" if self.biomass < WASHOUT else None)
-        return (self._obs(), 0.0, event is not None, False,
-                {"event": event, "task": abs(self.biomass - self.asked)})
+        event = "bloom" if self.biomass > BLOOM else "washout" if self.biomass < WASHOUT else None
+        return (
+            self._obs(),
+            0.0,
+            event is not None,
+            False,
+            {"event": event, "task": abs(self.biomass - self.asked)},
+        )
 
     def _obs(self) -> np.ndarray:
         return np.array([self.biomass, self.sugar, self.feed, self.asked])
@@ -140,8 +144,9 @@ class Regulator:
         biomass, _, _, asked = (float(v) for v in obs)
         measured = biomass * self.scale
         # the probe: d read/dt = (measured - read) / lag
-        self.read = (measured if self.read is None
-                     else self.read + (measured - self.read) * DT / PROBE_LAG)
+        self.read = (
+            measured if self.read is None else self.read + (measured - self.read) * DT / PROBE_LAG
+        )
         gap = self.read - asked
         self.integral += gap * DT
         # what the model says holds the biomass asked, on the recipe's feed
@@ -153,16 +158,19 @@ class Regulator:
 # takes, the dilution's range in 20 bins, and each failure with the direction of dilution
 # that moves away from it; the second adds where each failure lies.
 SPACES = SimpleNamespace(
-    observation_space=Box(low=np.array([0.0, 0.0, 15.0, 0.0]),
-                          high=np.array([8.0, 20.0, 25.0, 5.0]), dtype=np.float64),
+    observation_space=Box(
+        low=np.array([0.0, 0.0, 15.0, 0.0]), high=np.array([8.0, 20.0, 25.0, 5.0]), dtype=np.float64
+    ),
     action_space=Box(low=0.0, high=DILUTION_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(
-    SPACES, {"bloom": "increase", "washout": "decrease"})  # type: ignore[arg-type]
-BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "bloom": ("increase", Bound("x0", above=BLOOM)),
-    "washout": ("decrease", Bound("x0", below=WASHOUT)),
-})
+CONFIG: ShieldConfig = config_for(SPACES, {"bloom": "increase", "washout": "decrease"})  # type: ignore[arg-type]
+BOUNDED: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "bloom": ("increase", Bound("x0", above=BLOOM)),
+        "washout": ("decrease", Bound("x0", below=WASHOUT)),
+    },
+)
 
 
 WORLD = plain_world("tuning-chemostat", Chemostat, Regulator, CONFIG, MAX_STEPS)

@@ -88,15 +88,21 @@ class Dose:
         self.rng = np.random.default_rng(seed)
         self.minute = START * 60.0
         self.sensitivity = SENSITIVITY * float(np.exp(self.rng.normal(0.0, 0.12)))
-        self.meals = [(float(self.rng.uniform(a, b)) * 60.0, float(self.rng.uniform(30.0, 100.0)))
-                      for a, b in MEALS]
+        self.meals = [
+            (float(self.rng.uniform(a, b)) * 60.0, float(self.rng.uniform(30.0, 100.0)))
+            for a, b in MEALS
+        ]
         if self.rng.random() < 0.5:
-            self.meals.append((float(self.rng.uniform(15.0, 17.0)) * 60.0,
-                               float(self.rng.uniform(10.0, 30.0))))
+            self.meals.append(
+                (float(self.rng.uniform(15.0, 17.0)) * 60.0, float(self.rng.uniform(10.0, 30.0)))
+            )
         if self.rng.random() < 0.5:
             begin = float(self.rng.uniform(14.0, 18.0)) * 60.0
-            self.exercise = (begin, begin + float(self.rng.uniform(60.0, 120.0)),
-                             float(self.rng.uniform(1.3, 1.8)))
+            self.exercise = (
+                begin,
+                begin + float(self.rng.uniform(60.0, 120.0)),
+                float(self.rng.uniform(1.3, 1.8)),
+            )
         else:
             self.exercise = (0.0, 0.0, 1.0)
         basal = float(self.rng.uniform(0.7, 1.3))  # [U/h] the night's insulin, still acting
@@ -121,16 +127,21 @@ class Dose:
             appearing = self.g2 / TAU_GUT  # [g/min]
             self.g1 -= self.g1 / TAU_GUT * h
             self.g2 += (self.g1 - self.g2) / TAU_GUT * h
-            self.glucose += (EGP - (SG + boost * self.action) * self.glucose
-                             + RISE * appearing) * h
+            self.glucose += (EGP - (SG + boost * self.action) * self.glucose + RISE * appearing) * h
         self.minute += DT
         event = "low" if self.glucose < LOW else "high" if self.glucose > HIGH else None
-        return (self._obs(), 0.0, event is not None, False,
-                {"event": event, "task": abs(self.glucose - TARGET)})
+        return (
+            self._obs(),
+            0.0,
+            event is not None,
+            False,
+            {"event": event, "task": abs(self.glucose - TARGET)},
+        )
 
     def _obs(self) -> np.ndarray:
-        return np.array([self.glucose, self.q1 + self.q2, self.action / SENSITIVITY,
-                         self.g1 + self.g2])
+        return np.array(
+            [self.glucose, self.q1 + self.q2, self.action / SENSITIVITY, self.g1 + self.g2]
+        )
 
 
 class Pump:
@@ -152,8 +163,9 @@ class Pump:
     def __call__(self, obs: np.ndarray) -> float:
         glucose = float(obs[0]) * self.scale
         # the sensor: d read/dt = (glucose - read) / lag
-        self.read = (glucose if self.read is None
-                     else self.read + (glucose - self.read) * DT / SENSOR_LAG)
+        self.read = (
+            glucose if self.read is None else self.read + (glucose - self.read) * DT / SENSOR_LAG
+        )
         rate = self.basal + self.gain * (self.read - TARGET)
         return min(max(rate, 0.0), RATE_MAX)
 
@@ -162,16 +174,21 @@ class Pump:
 # takes, the pump's range in 20 bins, and each failure with the direction of the rate that
 # moves away from it; the second adds where each failure lies.
 SPACES = SimpleNamespace(
-    observation_space=Box(low=np.array([2.0, 0.0, 0.0, 0.0]),
-                          high=np.array([20.0, 10.0, 5.0, 100.0]), dtype=np.float64),
+    observation_space=Box(
+        low=np.array([2.0, 0.0, 0.0, 0.0]),
+        high=np.array([20.0, 10.0, 5.0, 100.0]),
+        dtype=np.float64,
+    ),
     action_space=Box(low=0.0, high=RATE_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(
-    SPACES, {"low": "decrease", "high": "increase"})  # type: ignore[arg-type]
-BOUNDED: ShieldConfig = config_for(SPACES, {  # type: ignore[arg-type]
-    "low": ("decrease", Bound("x0", below=LOW)),
-    "high": ("increase", Bound("x0", above=HIGH)),
-})
+CONFIG: ShieldConfig = config_for(SPACES, {"low": "decrease", "high": "increase"})  # type: ignore[arg-type]
+BOUNDED: ShieldConfig = config_for(
+    SPACES,
+    {  # type: ignore[arg-type]
+        "low": ("decrease", Bound("x0", below=LOW)),
+        "high": ("increase", Bound("x0", above=HIGH)),
+    },
+)
 
 
 WORLD = plain_world("tuning-dose", Dose, Pump, CONFIG, MAX_STEPS)

@@ -37,19 +37,29 @@ class World:
     max_steps: int
 
 
-def plain_world(name: str, make: Callable[[], Any],
-                controller: Callable[[int], Callable[[Any], float]], config: ShieldConfig,
-                max_steps: int) -> World:
+def plain_world(
+    name: str,
+    make: Callable[[], Any],
+    controller: Callable[[int], Callable[[Any], float]],
+    config: ShieldConfig,
+    max_steps: int,
+) -> World:
     """A world whose environment (``make()``, the same for every seed: ``reset(seed)`` draws)
     names a step's failure in ``info["event"]`` and whose whole observation the shield sees."""
-    return World(name=name, make=lambda seed: make(), controller=controller, config=config,
-                 event=lambda observation, info: info["event"],
-                 shield_observation=lambda observation: [float(v) for v in observation],
-                 max_steps=max_steps)
+    return World(
+        name=name,
+        make=lambda seed: make(),
+        controller=controller,
+        config=config,
+        event=lambda observation, info: info["event"],
+        shield_observation=lambda observation: [float(v) for v in observation],
+        max_steps=max_steps,
+    )
 
 
-def run(world: World, seed: int, episodes: int, warmup: int,
-        config: ShieldConfig | None) -> dict[str, Any]:
+def run(
+    world: World, seed: int, episodes: int, warmup: int, config: ShieldConfig | None
+) -> dict[str, Any]:
     """One run: ``episodes`` episodes of ``world`` from ``seed``; ``config`` None runs the
     controller alone.
 
@@ -96,15 +106,22 @@ def run(world: World, seed: int, episodes: int, warmup: int,
             if event is not None or terminated or truncated:
                 break
         if shield is not None:
-            shield.step(world.shield_observation(observation), None, stream="0", done=True,
-                        event=event)
-    return {"failures": dict(failures), "total": sum(failures.values()),
-            "early": dict(early), "early_total": sum(early.values()),
-            "episodes": episodes - warmup, "steps": steps, "revised": revised,
-            "revised_share": revised / steps if steps else 0.0,
-            "mean_revision": revision / revised if revised else 0.0,
-            "task": task / tasks if tasks else None,
-            "states": None if shield is None else shield.n_states}
+            shield.step(
+                world.shield_observation(observation), None, stream="0", done=True, event=event
+            )
+    return {
+        "failures": dict(failures),
+        "total": sum(failures.values()),
+        "early": dict(early),
+        "early_total": sum(early.values()),
+        "episodes": episodes - warmup,
+        "steps": steps,
+        "revised": revised,
+        "revised_share": revised / steps if steps else 0.0,
+        "mean_revision": revision / revised if revised else 0.0,
+        "task": task / tasks if tasks else None,
+        "states": None if shield is None else shield.n_states,
+    }
 
 
 def ratio(shielded: int, alone: int) -> float | None:
@@ -113,8 +130,9 @@ def ratio(shielded: int, alone: int) -> float | None:
     return shielded / alone if alone else None
 
 
-def compare(world: World, seeds: list[int], episodes: int, warmup: int,
-            config: ShieldConfig | None = None) -> dict[str, Any]:
+def compare(
+    world: World, seeds: list[int], episodes: int, warmup: int, config: ShieldConfig | None = None
+) -> dict[str, Any]:
     """The controller alone and shielded on each seed: totals, their ratio, the worst seed's
     ratio and the seeds on which the shield did harm (more failures than alone, after the
     warm-up or within it)."""
@@ -123,21 +141,35 @@ def compare(world: World, seeds: list[int], episodes: int, warmup: int,
     for seed in seeds:
         alone = run(world, seed, episodes, warmup, None)
         shielded = run(world, seed, episodes, warmup, config)
-        rows.append({"seed": seed, "alone": alone, "shielded": shielded,
-                     "ratio": ratio(shielded["total"], alone["total"])})
+        rows.append(
+            {
+                "seed": seed,
+                "alone": alone,
+                "shielded": shielded,
+                "ratio": ratio(shielded["total"], alone["total"]),
+            }
+        )
     alone_total = sum(r["alone"]["total"] for r in rows)
     shield_total = sum(r["shielded"]["total"] for r in rows)
     ratios = [r["ratio"] for r in rows if r["ratio"] is not None]
-    return {"world": world.name, "episodes": episodes, "warmup": warmup, "seeds": seeds,
-            "config": config.to_dict(), "runs": rows, "alone": alone_total,
-            "shielded": shield_total, "ratio": ratio(shield_total, alone_total),
-            "worst_seed_ratio": max(ratios, default=None),
-            "harmed_seeds": [r["seed"] for r in rows
-                             if r["shielded"]["total"] > r["alone"]["total"]],
-            "early_harmed_seeds": [r["seed"] for r in rows if r["shielded"]["early_total"]
-                                   > r["alone"]["early_total"]],
-            "alone_early": sum(r["alone"]["early_total"] for r in rows),
-            "shielded_early": sum(r["shielded"]["early_total"] for r in rows)}
+    return {
+        "world": world.name,
+        "episodes": episodes,
+        "warmup": warmup,
+        "seeds": seeds,
+        "config": config.to_dict(),
+        "runs": rows,
+        "alone": alone_total,
+        "shielded": shield_total,
+        "ratio": ratio(shield_total, alone_total),
+        "worst_seed_ratio": max(ratios, default=None),
+        "harmed_seeds": [r["seed"] for r in rows if r["shielded"]["total"] > r["alone"]["total"]],
+        "early_harmed_seeds": [
+            r["seed"] for r in rows if r["shielded"]["early_total"] > r["alone"]["early_total"]
+        ],
+        "alone_early": sum(r["alone"]["early_total"] for r in rows),
+        "shielded_early": sum(r["shielded"]["early_total"] for r in rows),
+    }
 
 
 def summary_line(result: dict[str, Any]) -> str:
@@ -157,17 +189,24 @@ def summary_line(result: dict[str, Any]) -> str:
     runs = result["runs"]
     revised = sum(r["shielded"]["revised"] for r in runs)
     steps = sum(r["shielded"]["steps"] for r in runs)
-    tasks = [(r["alone"]["task"], r["shielded"]["task"]) for r in runs
-             if r["alone"]["task"] is not None]
-    task = (f", task {sum(a for a, _ in tasks) / len(tasks):.3g} alone, "
-            f"{sum(s for _, s in tasks) / len(tasks):.3g} shielded" if tasks else "")
+    tasks = [
+        (r["alone"]["task"], r["shielded"]["task"]) for r in runs if r["alone"]["task"] is not None
+    ]
+    task = (
+        f", task {sum(a for a, _ in tasks) / len(tasks):.3g} alone, "
+        f"{sum(s for _, s in tasks) / len(tasks):.3g} shielded"
+        if tasks
+        else ""
+    )
     harmed = result["harmed_seeds"] + [f"{s} (warm-up)" for s in result["early_harmed_seeds"]]
-    return (f"{result['world']}: alone {result['alone'] * per:.1f} per 100 episodes "
-            f"{dict(alone)}, shielded {result['shielded'] * per:.1f} {dict(shielded)}, "
-            f"ratio {figure(result['ratio'])} (worst seed {figure(result['worst_seed_ratio'])}"
-            f", worse than alone on {harmed or 'none'}), warm-up {result['alone_early']} alone"
-            f" vs {result['shielded_early']}, revised {revised / max(steps, 1):.1%}{task}, "
-            f"states {[r['shielded']['states'] for r in runs]}")
+    return (
+        f"{result['world']}: alone {result['alone'] * per:.1f} per 100 episodes "
+        f"{dict(alone)}, shielded {result['shielded'] * per:.1f} {dict(shielded)}, "
+        f"ratio {figure(result['ratio'])} (worst seed {figure(result['worst_seed_ratio'])}"
+        f", worse than alone on {harmed or 'none'}), warm-up {result['alone_early']} alone"
+        f" vs {result['shielded_early']}, revised {revised / max(steps, 1):.1%}{task}, "
+        f"states {[r['shielded']['states'] for r in runs]}"
+    )
 
 
 def dump(result: dict[str, Any]) -> str:

@@ -102,8 +102,9 @@ class SpeedTask(gym.Wrapper[np.ndarray, np.ndarray, np.ndarray, np.ndarray]):
     (``terminated``) as a crash does. highway-env reports the speed but no task figure, and
     knows no failure but the crash."""
 
-    def __init__(self, env: gym.Env[np.ndarray, np.ndarray],
-                 min_speed: float | None = None) -> None:
+    def __init__(
+        self, env: gym.Env[np.ndarray, np.ndarray], min_speed: float | None = None
+    ) -> None:
         super().__init__(env)
         self.min_speed = min_speed
 
@@ -114,17 +115,24 @@ class SpeedTask(gym.Wrapper[np.ndarray, np.ndarray, np.ndarray, np.ndarray]):
             info["too_slow"] = speed < self.min_speed
         return info
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
-              ) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         observation, info = self.env.reset(seed=seed, options=options)
         return observation, self._figures(info)
 
-    def step(self, action: np.ndarray
-             ) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+    def step(
+        self, action: np.ndarray
+    ) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
         observation, reward, terminated, truncated, info = self.env.step(action)
         info = self._figures(info)
-        return (observation, reward, bool(terminated or info.get("too_slow", False)),
-                bool(truncated), info)
+        return (
+            observation,
+            reward,
+            bool(terminated or info.get("too_slow", False)),
+            bool(truncated),
+            info,
+        )
 
 
 def make_env(min_speed: float | None = None) -> SpeedTask:
@@ -199,19 +207,32 @@ SPACES = SimpleNamespace(
     action_space=Box(-1.0, 1.0, shape=(1,), dtype=np.float32),
 )
 LOW, HIGH = [-1.0] * (CARS * FEATURES), [1.0] * (CARS * FEATURES)
-CONFIG: ShieldConfig = config_for(
-    SPACES, {"collision": "decrease"}, low=LOW, high=HIGH)  # type: ignore[arg-type]
+CONFIG: ShieldConfig = config_for(SPACES, {"collision": "decrease"}, low=LOW, high=HIGH)  # type: ignore[arg-type]
 CONFIG_TOO_SLOW: ShieldConfig = config_for(
-    SPACES, {"collision": "decrease", "too_slow": "increase"},  # type: ignore[arg-type]
-    low=LOW, high=HIGH)
+    SPACES,
+    {"collision": "decrease", "too_slow": "increase"},  # type: ignore[arg-type]
+    low=LOW,
+    high=HIGH,
+)
 
-WORLD = World(name="highway", make=lambda seed: make_env(), controller=GapKeeper,
-              config=CONFIG, event=collision, shield_observation=shield_observation,
-              max_steps=MAX_STEPS)
-WORLD_TOO_SLOW = World(name="highway-too-slow", make=lambda seed: make_env(TOO_SLOW),
-                       controller=GapKeeper, config=CONFIG_TOO_SLOW,
-                       event=collision_or_too_slow, shield_observation=shield_observation,
-                       max_steps=MAX_STEPS)
+WORLD = World(
+    name="highway",
+    make=lambda seed: make_env(),
+    controller=GapKeeper,
+    config=CONFIG,
+    event=collision,
+    shield_observation=shield_observation,
+    max_steps=MAX_STEPS,
+)
+WORLD_TOO_SLOW = World(
+    name="highway-too-slow",
+    make=lambda seed: make_env(TOO_SLOW),
+    controller=GapKeeper,
+    config=CONFIG_TOO_SLOW,
+    event=collision_or_too_slow,
+    shield_observation=shield_observation,
+    max_steps=MAX_STEPS,
+)
 
 
 def alone(world: World, seed: int, episodes: int) -> dict[str, float]:
@@ -226,16 +247,19 @@ def alone(world: World, seed: int, episodes: int) -> dict[str, float]:
     for episode in range(episodes):
         observation, info = env.reset(seed=seed * 100_003 + episode)
         for _ in range(world.max_steps):
-            observation, _, terminated, truncated, info = env.step(
-                np.array([act(observation)]))
+            observation, _, terminated, truncated, info = env.step(np.array([act(observation)]))
             speeds.append(float(info["speed"]))
             event = world.event(observation, info)
             if event is not None:
                 kinds[event] = kinds.get(event, 0.0) + 1.0 / episodes
             if event is not None or terminated or truncated:
                 break
-    return {**kinds, "failed": sum(kinds.values()), "speed": float(np.mean(speeds)),
-            "seconds": (time.perf_counter() - start) / episodes}
+    return {
+        **kinds,
+        "failed": sum(kinds.values()),
+        "speed": float(np.mean(speeds)),
+        "seconds": (time.perf_counter() - start) / episodes,
+    }
 
 
 def main() -> None:
@@ -245,17 +269,23 @@ def main() -> None:
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--episodes", type=int, default=60)
     args = parser.parse_args()
-    print(f"Controller alone, {args.episodes} episodes a seed, "
-          f"{platform.processor() or platform.machine()}.\n")
+    print(
+        f"Controller alone, {args.episodes} episodes a seed, "
+        f"{platform.processor() or platform.machine()}.\n"
+    )
     print("| world | seed | failed | by kind | mean speed [m/s] | s / episode |")
     print("|---|---|---|---|---|---|")
     for world in (WORLD, WORLD_TOO_SLOW):
         for seed in (int(s) for s in args.seeds.split(",")):
             row = alone(world, seed, args.episodes)
-            kinds = ", ".join(f"{k} {v:.0%}" for k, v in row.items()
-                              if k not in ("failed", "speed", "seconds"))
-            print(f"| {world.name} | {seed} | {row['failed']:.1%} | {kinds} | "
-                  f"{row['speed']:.1f} | {row['seconds']:.2f} |", flush=True)
+            kinds = ", ".join(
+                f"{k} {v:.0%}" for k, v in row.items() if k not in ("failed", "speed", "seconds")
+            )
+            print(
+                f"| {world.name} | {seed} | {row['failed']:.1%} | {kinds} | "
+                f"{row['speed']:.1f} | {row['seconds']:.2f} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -81,12 +81,19 @@ class LateFiring:
 
 
 CONFIG = ShieldConfig(
-    observation=ObservationSpec(names=("altitude", "descent"), low=(0.0, -5.0),
-                                high=(150.0, 20.0), knee=()),
+    observation=ObservationSpec(
+        names=("altitude", "descent"), low=(0.0, -5.0), high=(150.0, 20.0), knee=()
+    ),
     action=ActionSpec(low=0.0, high=THRUST_MAX, step=1.0),
     criteria=(Criterion("hard_landing", "increase"), Criterion("climb", "decrease")),
 )
 
-WORLD = World(name="tuning-lander", make=lambda seed: Lander(), controller=LateFiring,
-              config=CONFIG, event=lambda obs, info: info["event"],
-              shield_observation=lambda obs: [float(v) for v in obs], max_steps=1200)
+WORLD = World(
+    name="tuning-lander",
+    make=lambda seed: Lander(),
+    controller=LateFiring,
+    config=CONFIG,
+    event=lambda obs, info: info["event"],
+    shield_observation=lambda obs: [float(v) for v in obs],
+    max_steps=1200,
+)

@@ -58,8 +58,13 @@ class Lane:
         disturbance = self.push + float(self.rng.normal(0.0, 0.3))
         self.speed += (self.accel + disturbance) * DT
         self.offset += self.speed * DT
-        event = ("departure_left" if self.offset > EDGE
-                 else "departure_right" if self.offset < -EDGE else None)
+        event = (
+            "departure_left"
+            if self.offset > EDGE
+            else "departure_right"
+            if self.offset < -EDGE
+            else None
+        )
         return self._obs(), 0.0, event is not None, False, {"event": event}
 
     def _obs(self) -> np.ndarray:
@@ -97,13 +102,25 @@ class DrowsyDriver:
 
 
 CONFIG = ShieldConfig(
-    observation=ObservationSpec(names=("offset", "lateral_speed", "lateral_accel"),
-                                low=(-2.0, -3.0, -A_MAX), high=(2.0, 3.0, A_MAX), knee=()),
+    observation=ObservationSpec(
+        names=("offset", "lateral_speed", "lateral_accel"),
+        low=(-2.0, -3.0, -A_MAX),
+        high=(2.0, 3.0, A_MAX),
+        knee=(),
+    ),
     action=ActionSpec(low=-A_MAX, high=A_MAX, step=0.3),
-    criteria=(Criterion("departure_left", "decrease", Bound("offset", above=EDGE)),
-              Criterion("departure_right", "increase", Bound("offset", below=-EDGE))),
+    criteria=(
+        Criterion("departure_left", "decrease", Bound("offset", above=EDGE)),
+        Criterion("departure_right", "increase", Bound("offset", below=-EDGE)),
+    ),
 )
 
-WORLD = World(name="lane", make=lambda seed: Lane(), controller=DrowsyDriver, config=CONFIG,
-              event=lambda obs, info: info["event"],
-              shield_observation=lambda obs: [float(v) for v in obs[:3]], max_steps=300)
+WORLD = World(
+    name="lane",
+    make=lambda seed: Lane(),
+    controller=DrowsyDriver,
+    config=CONFIG,
+    event=lambda obs, info: info["event"],
+    shield_observation=lambda obs: [float(v) for v in obs[:3]],
+    max_steps=300,
+)

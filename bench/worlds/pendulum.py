@@ -40,13 +40,22 @@ def overspeed(obs: np.ndarray, info: dict[str, Any]) -> str | None:
 
 
 CONFIG = ShieldConfig(
-    observation=ObservationSpec(names=("cos", "sin", "theta_dot"), low=(-1.0, -1.0, -8.0),
-                                high=(1.0, 1.0, 8.0), knee=()),
+    observation=ObservationSpec(
+        names=("cos", "sin", "theta_dot"), low=(-1.0, -1.0, -8.0), high=(1.0, 1.0, 8.0), knee=()
+    ),
     action=ActionSpec(low=-2.0, high=2.0, step=0.2),
-    criteria=(Criterion("overspeed_ccw", "decrease", Bound("theta_dot", above=LIMIT)),
-              Criterion("overspeed_cw", "increase", Bound("theta_dot", below=-LIMIT))),
+    criteria=(
+        Criterion("overspeed_ccw", "decrease", Bound("theta_dot", above=LIMIT)),
+        Criterion("overspeed_cw", "increase", Bound("theta_dot", below=-LIMIT)),
+    ),
 )
 
-WORLD = World(name="pendulum-overspeed", make=lambda seed: gym.make("Pendulum-v1"),
-              controller=EnergyPump, config=CONFIG, event=overspeed,
-              shield_observation=lambda obs: [float(v) for v in obs], max_steps=200)
+WORLD = World(
+    name="pendulum-overspeed",
+    make=lambda seed: gym.make("Pendulum-v1"),
+    controller=EnergyPump,
+    config=CONFIG,
+    event=overspeed,
+    shield_observation=lambda obs: [float(v) for v in obs],
+    max_steps=200,
+)

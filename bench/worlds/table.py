@@ -15,10 +15,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
-HEADER = ("| world | failures alone | shielded | ratio | worst seed | seeds worse than alone | "
-          "warm-up alone / shielded | seeds worse in the warm-up | steps revised | "
-          "mean revision | task alone / shielded |\n"
-          "|---|---:|---:|---:|---:|---|---:|---|---:|---:|---:|")
+HEADER = (
+    "| world | failures alone | shielded | ratio | worst seed | seeds worse than alone | "
+    "warm-up alone / shielded | seeds worse in the warm-up | steps revised | "
+    "mean revision | task alone / shielded |\n"
+    "|---|---:|---:|---:|---:|---|---:|---|---:|---:|---:|"
+)
 
 
 def _figure(value: float | None, digits: int = 2) -> str:
@@ -31,17 +33,26 @@ def row(result: dict[str, Any]) -> str:
     revised = sum(r["shielded"]["revised"] for r in runs)
     steps = sum(r["shielded"]["steps"] for r in runs)
     size = sum(r["shielded"]["mean_revision"] * r["shielded"]["revised"] for r in runs)
-    tasks = [(r["alone"]["task"], r["shielded"]["task"]) for r in runs
-             if r["alone"]["task"] is not None]
-    task = "-" if not tasks else (f"{sum(a for a, _ in tasks) / len(tasks):.3g} / "
-                                  f"{sum(s for _, s in tasks) / len(tasks):.3g}")
-    return (f"| {result['world']} | {result['alone']} | {result['shielded']} | "
-            f"{_figure(result['ratio'])} | {_figure(result['worst_seed_ratio'])} | "
-            f"{', '.join(map(str, result['harmed_seeds'])) or 'none'} | "
-            f"{result['alone_early']} / {result['shielded_early']} | "
-            f"{', '.join(map(str, result['early_harmed_seeds'])) or 'none'} | "
-            f"{revised / max(steps, 1):.1%} | {_figure(size / revised if revised else None, 3)}"
-            f" | {task} |")
+    tasks = [
+        (r["alone"]["task"], r["shielded"]["task"]) for r in runs if r["alone"]["task"] is not None
+    ]
+    task = (
+        "-"
+        if not tasks
+        else (
+            f"{sum(a for a, _ in tasks) / len(tasks):.3g} / "
+            f"{sum(s for _, s in tasks) / len(tasks):.3g}"
+        )
+    )
+    return (
+        f"| {result['world']} | {result['alone']} | {result['shielded']} | "
+        f"{_figure(result['ratio'])} | {_figure(result['worst_seed_ratio'])} | "
+        f"{', '.join(map(str, result['harmed_seeds'])) or 'none'} | "
+        f"{result['alone_early']} / {result['shielded_early']} | "
+        f"{', '.join(map(str, result['early_harmed_seeds'])) or 'none'} | "
+        f"{revised / max(steps, 1):.1%} | {_figure(size / revised if revised else None, 3)}"
+        f" | {task} |"
+    )
 
 
 def table(paths: list[Path]) -> str:

@@ -88,12 +88,19 @@ class LateValve:
 
 
 CONFIG = ShieldConfig(
-    observation=ObservationSpec(names=("level", "inflow"), low=(0.0, 0.0), high=(10.0, 4.5),
-                                knee=()),
+    observation=ObservationSpec(
+        names=("level", "inflow"), low=(0.0, 0.0), high=(10.0, 4.5), knee=()
+    ),
     action=ActionSpec(low=0.0, high=PUMP_MAX, step=0.25),
     criteria=(Criterion("overflow", "increase"), Criterion("dry", "decrease")),
 )
 
-WORLD = World(name="tuning-tank", make=lambda seed: Tank(), controller=LateValve, config=CONFIG,
-              event=lambda obs, info: info["event"],
-              shield_observation=lambda obs: [float(v) for v in obs], max_steps=400)
+WORLD = World(
+    name="tuning-tank",
+    make=lambda seed: Tank(),
+    controller=LateValve,
+    config=CONFIG,
+    event=lambda obs, info: info["event"],
+    shield_observation=lambda obs: [float(v) for v in obs],
+    max_steps=400,
+)

@@ -73,19 +73,23 @@ PLAIN = ShieldConfig(observation=ObservationSpec(high=(35.0, 200.0, 35.0), knee=
 
 
 def _world(name: str, controller: Any, config: ShieldConfig | None = None) -> World:
-    return World(name=name, make=lambda seed: CarFollowingEnv(lead=_LEAD),
-                 controller=controller, config=config or ShieldConfig(),
-                 event=lambda obs, info: info["event"],
-                 shield_observation=lambda obs: [float(obs[0]), float(obs[1]), float(obs[2])],
-                 max_steps=MAX_STEPS)
+    return World(
+        name=name,
+        make=lambda seed: CarFollowingEnv(lead=_LEAD),
+        controller=controller,
+        config=config or ShieldConfig(),
+        event=lambda obs, info: info["event"],
+        shield_observation=lambda obs: [float(obs[0]), float(obs[1]), float(obs[2])],
+        max_steps=MAX_STEPS,
+    )
 
 
 _CONTROLLERS: dict[str, tuple[str, Any]] = {
     "idm": ("idm-aggressive", lambda seed: PRESETS["aggressive"].act),
     "sluggish": ("idm-sluggish", lambda seed: PRESETS["sluggish"].act),
     "late": ("idm-late", LateIDM),
-    "collapsed": ("collapsed", lambda seed: (lambda observation: -2.0)),
-    "flat_out": ("flat-out", lambda seed: (lambda observation: 2.0)),
+    "collapsed": ("collapsed", lambda seed: lambda observation: -2.0),
+    "flat_out": ("flat-out", lambda seed: lambda observation: 2.0),
     "random": ("random", lambda seed: RandomController(seed).act),
 }
 

@@ -69,12 +69,19 @@ class LateBraker:
 
 
 CONFIG = ShieldConfig(
-    observation=ObservationSpec(names=("distance", "speed"), low=(0.0, 0.0),
-                                high=(250.0, 25.0), knee=()),
+    observation=ObservationSpec(
+        names=("distance", "speed"), low=(0.0, 0.0), high=(250.0, 25.0), knee=()
+    ),
     action=ActionSpec(low=-8.0, high=2.0, step=0.5),
     criteria=(Criterion("crash", "decrease"), Criterion("short", "increase")),
 )
 
-WORLD = World(name="wall", make=lambda seed: Wall(), controller=LateBraker, config=CONFIG,
-              event=lambda obs, info: info["event"],
-              shield_observation=lambda obs: [float(v) for v in obs], max_steps=600)
+WORLD = World(
+    name="wall",
+    make=lambda seed: Wall(),
+    controller=LateBraker,
+    config=CONFIG,
+    event=lambda obs, info: info["event"],
+    shield_observation=lambda obs: [float(v) for v in obs],
+    max_steps=600,
+)

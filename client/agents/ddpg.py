@@ -21,8 +21,13 @@ from torch import nn
 from client.agents.flat import adam_step, subnormals_flushed, views
 
 # the columns of a stored transition; a checkpoint keeps them as arrays of these names
-COLUMNS = {"obs": slice(0, 4), "action": slice(4, 5), "reward": slice(5, 6),
-           "next_obs": slice(6, 10), "done": slice(10, 11)}
+COLUMNS = {
+    "obs": slice(0, 4),
+    "action": slice(4, 5),
+    "reward": slice(5, 6),
+    "next_obs": slice(6, 10),
+    "done": slice(10, 11),
+}
 TRANSITION = 11
 OBS_SCALE = np.array([32.0, 200.0, 32.0, 2.0], dtype=np.float32)  # z-bar: Eq. 9 normalised
 A_MAX = 2.0  # [m/s^2]
@@ -70,11 +75,18 @@ class ReplayBuffer:
         self.rng = np.random.default_rng(seed)
         self.transitions = np.zeros((size, TRANSITION), np.float32)
         self.obs, self.action, self.reward, self.next_obs, self.done = (
-            self.transitions[:, COLUMNS[name]] for name in COLUMNS)
+            self.transitions[:, COLUMNS[name]] for name in COLUMNS
+        )
         self.count = 0
 
-    def add(self, obs: npt.NDArray[np.float32], action: float, reward: float,
-            next_obs: npt.NDArray[np.float32], terminal: bool) -> None:
+    def add(
+        self,
+        obs: npt.NDArray[np.float32],
+        action: float,
+        reward: float,
+        next_obs: npt.NDArray[np.float32],
+        terminal: bool,
+    ) -> None:
         i = self.count % self.size
         self.obs[i], self.next_obs[i] = obs, next_obs
         self.action[i], self.reward[i], self.done[i] = action, reward, float(terminal)
@@ -82,8 +94,12 @@ class ReplayBuffer:
 
     def sample(self, batch: int) -> ReplaySample:
         index = self.rng.integers(0, min(self.count, self.size), batch)
-        return ReplaySample(*(torch.from_numpy(x[index]) for x in
-                              (self.obs, self.action, self.reward, self.next_obs, self.done)))
+        return ReplaySample(
+            *(
+                torch.from_numpy(x[index])
+                for x in (self.obs, self.action, self.reward, self.next_obs, self.done)
+            )
+        )
 
     def sample_into(self, rows: npt.NDArray[np.float32]) -> None:
         """Draw ``len(rows)`` transitions as :meth:`sample` would (the same generator draws),
@@ -95,8 +111,11 @@ class ReplayBuffer:
         """The transitions held and where the generator stands: :meth:`restore` continues
         exactly from here."""
         held = min(self.count, self.size)
-        return {"count": self.count, "rng": self.rng.bit_generator.state,
-                **{name: getattr(self, name)[:held].copy() for name in COLUMNS}}
+        return {
+            "count": self.count,
+            "rng": self.rng.bit_generator.state,
+            **{name: getattr(self, name)[:held].copy() for name in COLUMNS},
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         held = min(state["count"], self.size)
@@ -116,7 +135,8 @@ class OrnsteinUhlenbeckNoise:
 
     def __call__(self) -> float:
         self.x += self.theta * -self.x * self.dt + self.sigma * np.sqrt(self.dt) * float(
-            self.rng.normal())
+            self.rng.normal()
+        )
         return self.x
 
     def reset(self) -> None:
@@ -133,9 +153,14 @@ class OrnsteinUhlenbeckNoise:
 class Actor(nn.Module):
     def __init__(self, hidden: tuple[int, int]) -> None:
         super().__init__()
-        self.net = nn.Sequential(nn.Linear(4, hidden[0]), nn.ReLU(),
-                                 nn.Linear(hidden[0], hidden[1]), nn.ReLU(),
-                                 nn.Linear(hidden[1], 1), nn.Tanh())
+        self.net = nn.Sequential(
+            nn.Linear(4, hidden[0]),
+            nn.ReLU(),
+            nn.Linear(hidden[0], hidden[1]),
+            nn.ReLU(),
+            nn.Linear(hidden[1], 1),
+            nn.Tanh(),
+        )
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return self.net(obs) * A_MAX  # type: ignore[no-any-return]
@@ -144,9 +169,13 @@ class Actor(nn.Module):
 class Critic(nn.Module):
     def __init__(self, hidden: tuple[int, int]) -> None:
         super().__init__()
-        self.net = nn.Sequential(nn.Linear(5, hidden[0]), nn.ReLU(),
-                                 nn.Linear(hidden[0], hidden[1]), nn.ReLU(),
-                                 nn.Linear(hidden[1], 1))
+        self.net = nn.Sequential(
+            nn.Linear(5, hidden[0]),
+            nn.ReLU(),
+            nn.Linear(hidden[0], hidden[1]),
+            nn.ReLU(),
+            nn.Linear(hidden[1], 1),
+        )
 
     def forward(self, obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         return self.net(torch.cat([obs, action / A_MAX], dim=1))  # type: ignore[no-any-return]
@@ -189,8 +218,10 @@ class DDPG:
                 param.data = view
         split = len(params) // 2
         grads = views(self._grad, self._shapes)
-        self._layers, self._target_layers = (online[:split], online[split:]), \
-            (target[:split], target[split:])
+        self._layers, self._target_layers = (
+            (online[:split], online[split:]),
+            (target[:split], target[split:]),
+        )
         self._grads = grads[:split], grads[split:]
         cut = sum(p.numel() for p in self.actor.parameters())
         self._parts = slice(0, cut), slice(cut, None)  # the actor's and the critic's
@@ -209,8 +240,14 @@ class DDPG:
             a += self.noise()
         return min(max(a, -A_MAX), A_MAX)
 
-    def remember(self, obs: npt.NDArray[np.float32], executed: float, reward: float,
-                 next_obs: npt.NDArray[np.float32], terminal: bool) -> None:
+    def remember(
+        self,
+        obs: npt.NDArray[np.float32],
+        executed: float,
+        reward: float,
+        next_obs: npt.NDArray[np.float32],
+        terminal: bool,
+    ) -> None:
         self.buffer.add(self.scale(obs), executed, reward, self.scale(next_obs), terminal)
 
     def update(self) -> None:
@@ -225,8 +262,9 @@ class DDPG:
         cfg = self.config
         (actor, critic), (actor_target, critic_target) = self._layers, self._target_layers
         # critic: minimise the mean of (Q(z, a) - y)^2, y = r + gamma (1 - done) Q'(z', mu'(z'))
-        next_q = _forward(critic_target, _critic_input(batch.next_obs,
-                                                       _mu(actor_target, batch.next_obs)))[2]
+        next_q = _forward(
+            critic_target, _critic_input(batch.next_obs, _mu(actor_target, batch.next_obs))
+        )[2]
         target = batch.reward + cfg.gamma * (1.0 - batch.done) * next_q
         x = _critic_input(batch.obs, batch.action)
         h1, h2, q = _forward(critic, x)
@@ -251,12 +289,15 @@ class DDPG:
     def _adam(self, network: int, lr: float) -> None:
         """One Adam step of the actor (0) or the critic (1)."""
         part = self._parts[network]
-        adam_step(self._online[part], self._grad[part], self._moments[:, part],
-                  self._steps[network], lr)
+        adam_step(
+            self._online[part], self._grad[part], self._moments[:, part], self._steps[network], lr
+        )
 
 
-def _forward(layers: list[torch.Tensor], x: torch.Tensor,
-             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _forward(
+    layers: list[torch.Tensor],
+    x: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """The MLP's two hidden activations and its output, as ``nn.Linear`` computes them
     (``addmm`` of the bias, the input and the transposed weight)."""
     h1 = torch.relu(torch.addmm(layers[1], x, layers[0].t()))
@@ -264,8 +305,14 @@ def _forward(layers: list[torch.Tensor], x: torch.Tensor,
     return h1, h2, torch.addmm(layers[5], h2, layers[4].t())
 
 
-def _backward(layers: list[torch.Tensor], x: torch.Tensor, h1: torch.Tensor, h2: torch.Tensor,
-              grad_out: torch.Tensor, grads: list[torch.Tensor] | None) -> torch.Tensor:
+def _backward(
+    layers: list[torch.Tensor],
+    x: torch.Tensor,
+    h1: torch.Tensor,
+    h2: torch.Tensor,
+    grad_out: torch.Tensor,
+    grads: list[torch.Tensor] | None,
+) -> torch.Tensor:
     """Back-propagate ``grad_out`` through the MLP of :func:`_forward`, writing the gradients
     of its weights into ``grads`` where given; returns the gradient at the first layer's
     output (before its relu).
@@ -278,8 +325,9 @@ def _backward(layers: list[torch.Tensor], x: torch.Tensor, h1: torch.Tensor, h2:
     g2 = relu_backward(grad_out.mm(layers[4]), h2, 0)
     g1: torch.Tensor = relu_backward(g2.mm(layers[2]), h1, 0)
     if grads is not None:
-        for (w, b), inputs, g in zip(((4, 5), (2, 3), (0, 1)), (h2, h1, x),
-                                     (grad_out, g2, g1), strict=True):
+        for (w, b), inputs, g in zip(
+            ((4, 5), (2, 3), (0, 1)), (h2, h1, x), (grad_out, g2, g1), strict=True
+        ):
             grads[w].copy_(g.t().mm(inputs))  # mm(out=...) may round otherwise
             torch.sum(g, dim=0, out=grads[b])
     return g1

@@ -59,8 +59,14 @@ def _forward(params: Params, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tenso
     return h1, h2, torch.baddbmm(params[5], h2, params[4])
 
 
-def _backward(params: Params, x: torch.Tensor, h1: torch.Tensor, h2: torch.Tensor,
-              grad_out: torch.Tensor, grads: Params | None) -> torch.Tensor:
+def _backward(
+    params: Params,
+    x: torch.Tensor,
+    h1: torch.Tensor,
+    h2: torch.Tensor,
+    grad_out: torch.Tensor,
+    grads: Params | None,
+) -> torch.Tensor:
     """Back-propagate ``grad_out`` through the MLP of :func:`_forward`, writing the gradients
     of its weights into ``grads`` where given; returns the gradient at the first layer's
     output (before its relu), from which the caller gets the input's.
@@ -73,8 +79,9 @@ def _backward(params: Params, x: torch.Tensor, h1: torch.Tensor, h2: torch.Tenso
     g2 = relu_backward(grad_out.bmm(params[4].transpose(1, 2)), h2, 0)
     g1: torch.Tensor = relu_backward(g2.bmm(params[2].transpose(1, 2)), h1, 0)
     if grads is not None:
-        for (w, b), inputs, g in zip(((4, 5), (2, 3), (0, 1)), (h2, h1, x),
-                                     (grad_out, g2, g1), strict=True):
+        for (w, b), inputs, g in zip(
+            ((4, 5), (2, 3), (0, 1)), (h2, h1, x), (grad_out, g2, g1), strict=True
+        ):
             torch.bmm(inputs.transpose(1, 2), g, out=grads[w])
             torch.sum(g, dim=1, keepdim=True, out=grads[b])
     return g1
@@ -95,10 +102,14 @@ class DDPGEnsemble:
         self.config = config
         self.device = torch.device(device)
         self.members = [DDPG(config, seed) for seed in seeds]
-        actor, critic = _stack([m.actor for m in self.members]), \
-            _stack([m.critic for m in self.members])
-        targets = [*_stack([m.actor_target for m in self.members]),
-                   *_stack([m.critic_target for m in self.members])]
+        actor, critic = (
+            _stack([m.actor for m in self.members]),
+            _stack([m.critic for m in self.members]),
+        )
+        targets = [
+            *_stack([m.actor_target for m in self.members]),
+            *_stack([m.critic_target for m in self.members]),
+        ]
         self._shapes = [p.shape for p in [*actor, *critic]]
         # every flat buffer holds the actor's layers, then the critic's
         self._online = self._flat([*actor, *critic])
@@ -128,8 +139,14 @@ class DDPGEnsemble:
         """One Adam step of the actor (0) or the critic (1), over the network's share of the
         flat buffers."""
         part = self._parts[network]
-        adam_step(self._online[part], self._grad[part], self._moments[:, part],
-                  self._steps[network], lr, capturable=self.device.type == "cuda")
+        adam_step(
+            self._online[part],
+            self._grad[part],
+            self._moments[:, part],
+            self._steps[network],
+            lr,
+            capturable=self.device.type == "cuda",
+        )
 
     def _prepare(self) -> None:
         """Buffers for the sampled batch, sized for the current members; no graph yet."""
@@ -159,21 +176,31 @@ class DDPGEnsemble:
         """Everything the members have learned and drawn so far (networks, targets, Adam
         moments and counts, replay memories, exploration noise), on the CPU: :meth:`restore`
         on an ensemble of the same members continues exactly from here."""
-        return {"online": self._online.cpu().clone(), "target": self._target.cpu().clone(),
-                "moments": self._moments.cpu().clone(), "steps": self._steps.cpu().clone(),
-                "memories": [m.buffer.state() for m in self.members],
-                "noises": [m.noise.state() for m in self.members]}
+        return {
+            "online": self._online.cpu().clone(),
+            "target": self._target.cpu().clone(),
+            "moments": self._moments.cpu().clone(),
+            "steps": self._steps.cpu().clone(),
+            "memories": [m.buffer.state() for m in self.members],
+            "noises": [m.noise.state() for m in self.members],
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         """Continue from :meth:`state`."""
         if len(state["memories"]) != len(self.members):
-            raise ValueError(f"a state of {len(state['memories'])} members, not "
-                             f"{len(self.members)}")
-        for mine, saved in ((self._online, "online"), (self._target, "target"),
-                            (self._moments, "moments"), (self._steps, "steps")):
+            raise ValueError(
+                f"a state of {len(state['memories'])} members, not {len(self.members)}"
+            )
+        for mine, saved in (
+            (self._online, "online"),
+            (self._target, "target"),
+            (self._moments, "moments"),
+            (self._steps, "steps"),
+        ):
             mine.copy_(state[saved])
-        for member, memory, noise in zip(self.members, state["memories"], state["noises"],
-                                         strict=True):
+        for member, memory, noise in zip(
+            self.members, state["memories"], state["noises"], strict=True
+        ):
             member.buffer.restore(memory)
             member.noise.restore(noise)
         self._prepare()
@@ -221,8 +248,9 @@ class DDPGEnsemble:
         next_obs, done = batch[..., 6:10], batch[..., 10:11]
         size = 1.0 / cfg.batch_size  # each member's loss is a mean over its batch
         # critic: minimise the mean of (Q(z, a) - y)^2, y = r + gamma (1 - done) Q'(z', mu'(z'))
-        next_q = _forward(self.critic_target,
-                          _critic_input(next_obs, _mu(self.actor_target, next_obs)))[2]
+        next_q = _forward(
+            self.critic_target, _critic_input(next_obs, _mu(self.actor_target, next_obs))
+        )[2]
         target = reward + cfg.gamma * (1.0 - done) * next_q
         x = _critic_input(obs, action)
         h1, h2, q = _forward(self.critic, x)

@@ -24,19 +24,39 @@ def views(flat: torch.Tensor, shapes: Sequence[torch.Size]) -> list[torch.Tensor
     out, start = [], 0
     for shape in shapes:
         size = math.prod(shape)
-        out.append(flat[start:start + size].view(shape))
+        out.append(flat[start : start + size].view(shape))
         start += size
     return out
 
 
-def adam_step(online: torch.Tensor, grad: torch.Tensor, moments: torch.Tensor,
-              step: torch.Tensor, lr: float, capturable: bool = False) -> None:
+def adam_step(
+    online: torch.Tensor,
+    grad: torch.Tensor,
+    moments: torch.Tensor,
+    step: torch.Tensor,
+    lr: float,
+    capturable: bool = False,
+) -> None:
     """One step of ``torch.optim.Adam`` (its arithmetic, through its functional form) of the
     weights ``online``: ``moments`` holds Adam's first and second moments as two rows,
     ``step`` its step count (a one-element tensor, counted here)."""
-    adam([online], [grad], [moments[0]], [moments[1]], [], [step], foreach=True,
-         capturable=capturable, amsgrad=False, beta1=BETAS[0], beta2=BETAS[1], lr=lr,
-         weight_decay=0.0, eps=EPS, maximize=False)
+    adam(
+        [online],
+        [grad],
+        [moments[0]],
+        [moments[1]],
+        [],
+        [step],
+        foreach=True,
+        capturable=capturable,
+        amsgrad=False,
+        beta1=BETAS[0],
+        beta2=BETAS[1],
+        lr=lr,
+        weight_decay=0.0,
+        eps=EPS,
+        maximize=False,
+    )
 
 
 @contextlib.contextmanager

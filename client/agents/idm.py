@@ -25,8 +25,9 @@ class IDM:
     def act(self, observation: npt.NDArray[np.float32]) -> float:
         """The acceleration for ``[v_ego, headway, v_lead, a_prev]``."""
         v, s, v_lead = float(observation[0]), float(observation[1]), float(observation[2])
-        s_star = self.s0 + max(0.0, v * self.time_headway
-                               + v * (v - v_lead) / (2.0 * math.sqrt(self.a_max * self.b)))
+        s_star = self.s0 + max(
+            0.0, v * self.time_headway + v * (v - v_lead) / (2.0 * math.sqrt(self.a_max * self.b))
+        )
         a = self.a_max * (1.0 - (v / self.v0) ** 4 - (s_star / max(s, 0.1)) ** 2)
         return min(max(a, -A_LIMIT), A_LIMIT)
 

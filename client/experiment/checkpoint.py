@@ -50,12 +50,16 @@ def load(path: Path, identity: dict[str, Any]) -> dict[str, Any] | None:
     # our own file, holding numpy generator states and Python objects besides tensors
     saved = torch.load(path, map_location="cpu", weights_only=False)
     if saved.get("format") != FORMAT:
-        raise RecordError(f"{path}: a checkpoint of format {saved.get('format')}, written by "
-                          f"another version of the client (this one reads {FORMAT}); remove it "
-                          f"to start the group again")
+        raise RecordError(
+            f"{path}: a checkpoint of format {saved.get('format')}, written by "
+            f"another version of the client (this one reads {FORMAT}); remove it "
+            f"to start the group again"
+        )
     if saved.get("identity") != identity:
-        raise RecordError(f"{path}: a checkpoint of another experiment or group; remove it to "
-                          f"start the group again")
+        raise RecordError(
+            f"{path}: a checkpoint of another experiment or group; remove it to "
+            f"start the group again"
+        )
     state: dict[str, Any] = saved["state"]
     return state
 

@@ -48,23 +48,42 @@ class Place:
 
     def state(self, run: Run) -> dict[str, Any]:
         """The place with the simulator's state and the shield model's, for a checkpoint."""
-        return {"episode": self.episode, "meter": self.meter, "obs": self.obs, "z": self.z,
-                "elapsed": time.perf_counter() - self.started, "env": run.env.state(),
-                "model": None if run.shield is None else
-                model_state(run.config, run.arm, run.index, run.shield, run.token)}
+        return {
+            "episode": self.episode,
+            "meter": self.meter,
+            "obs": self.obs,
+            "z": self.z,
+            "elapsed": time.perf_counter() - self.started,
+            "env": run.env.state(),
+            "model": None
+            if run.shield is None
+            else model_state(run.config, run.arm, run.index, run.shield, run.token),
+        }
 
     @classmethod
     def restore(cls, run: Run, state: dict[str, Any]) -> Place:
         run.env.restore(state["env"])
-        return cls(state["episode"], state["meter"], time.perf_counter() - state["elapsed"],
-                   state["obs"], state["z"])
+        return cls(
+            state["episode"],
+            state["meter"],
+            time.perf_counter() - state["elapsed"],
+            state["obs"],
+            state["z"],
+        )
 
 
-def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | None = None,
-                 progress: Any | None = None, trace: bool = False,
-                 indices: Sequence[int] | None = None, device: str = "cpu",
-                 checkpoint_every: float | None = None,
-                 stop: Callable[[], bool] | None = None) -> int:
+def run_lockstep(
+    config: ExperimentConfig,
+    arm: str,
+    out: Path,
+    token: str | None = None,
+    progress: Any | None = None,
+    trace: bool = False,
+    indices: Sequence[int] | None = None,
+    device: str = "cpu",
+    checkpoint_every: float | None = None,
+    stop: Callable[[], bool] | None = None,
+) -> int:
     """The runs of a DDPG arm (all, or those ``indices``) in one process, stepping together: one
     batched DDPG update for all runs per step (:class:`~client.agents.ensemble.DDPGEnsemble`,
     on ``device``), and one round of shield requests per step: with the batch transport one
@@ -98,8 +117,9 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
     runs = []
     for i in group if saved is None else saved["active"]:
         model = None if saved is None else saved["places"][i]["model"]
-        run = Run.open(config, arm, i, out, token, wrap=False, trace=trace, learning=learning,
-                       model=model)
+        run = Run.open(
+            config, arm, i, out, token, wrap=False, trace=trace, learning=learning, model=model
+        )
         if run.complete and saved is None:
             run.close()
         else:  # a run of a checkpoint is played on: the members' arithmetic is batched
@@ -125,16 +145,23 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
     def save() -> None:
         if shield:
             shield.send_closing()
-        checkpoint.save(saved_at, identity, {
-            "active": [runs[k].index for k in active], "learner": learner.state(),
-            "places": {runs[k].index: places[k].state(runs[k]) for k in active}})
+        checkpoint.save(
+            saved_at,
+            identity,
+            {
+                "active": [runs[k].index for k in active],
+                "learner": learner.state(),
+                "places": {runs[k].index: places[k].state(runs[k]) for k in active},
+            },
+        )
 
     next_save = time.monotonic() + (checkpoint_every or 0.0)
     proposals = [0.0] * len(runs)
     try:
         while active:  # learner member j is run active[j]
-            for k, a in zip(active, learner.act(np.stack([places[k].obs for k in active])),
-                            strict=True):
+            for k, a in zip(
+                active, learner.act(np.stack([places[k].obs for k in active])), strict=True
+            ):
                 proposals[k] = a
             observed = [p.z for p in places]
             if first:
@@ -146,7 +173,8 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
                 place = places[k]
                 action = proposals[k] if decision is None else float(decision.action)
                 next_obs, reward, terminated, truncated, info = runs[k].env.step(
-                    np.array([action], np.float32))
+                    np.array([action], np.float32)
+                )
                 if decision is not None:
                     info["shield"], info["shield_observation"] = decision.to_dict(), place.z
                 recorder = runs[k].recorder(place.episode)
@@ -156,8 +184,9 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
                 learner.members[j].remember(place.obs, executed, reward, next_obs, terminated)
                 place.obs, place.z = next_obs, info["efsm_observation"]
                 if terminated or truncated:
-                    finish = _finisher(runs[k], place.episode, place.meter, info,
-                                       place.started, progress)
+                    finish = _finisher(
+                        runs[k], place.episode, place.meter, info, place.started, progress
+                    )
                     if shield:  # the record waits for the closing decision's state count
                         shield.close_episode(k, place.z, info["event"], finish)
                     else:
@@ -196,8 +225,14 @@ def run_lockstep(config: ExperimentConfig, arm: str, out: Path, token: str | Non
     return sum(r.appended for r in runs)
 
 
-def _finisher(run: Run, episode: int, meter: EpisodeMeter, info: dict[str, Any], start: float,
-              progress: Any | None) -> Callable[[Any], None]:
+def _finisher(
+    run: Run,
+    episode: int,
+    meter: EpisodeMeter,
+    info: dict[str, Any],
+    start: float,
+    progress: Any | None,
+) -> Callable[[Any], None]:
     wall = time.perf_counter() - start
 
     def finish(closing: Any) -> None:
@@ -215,24 +250,25 @@ class Lockstep:
     frame is sent before any reply is read; otherwise each run's own shield is asked in
     turn."""
 
-    def __init__(self, runs: list[Run], config: ExperimentConfig, arm: str,
-                 shadow: bool) -> None:
+    def __init__(self, runs: list[Run], config: ExperimentConfig, arm: str, shadow: bool) -> None:
         self.runs = runs
         self.shadow = shadow
         self.names = [model_name(config, arm, r.index) for r in runs]
         # the batch transport: run k's requests go to service_of[k] with the shield of the
         # first run there (one request per service and round)
         batch = [r.shield for r in runs if isinstance(r.shield, BatchShield)]
-        self.service_of = [config.shield_url(r.index) for r in runs] \
-            if len(batch) == len(runs) else []
+        self.service_of = (
+            [config.shield_url(r.index) for r in runs] if len(batch) == len(runs) else []
+        )
         self.carriers: dict[str, BatchShield] = {}
         for url, shield in zip(self.service_of, batch, strict=False):
             self.carriers.setdefault(url, shield)
         self.pool = ThreadPoolExecutor(len(self.carriers)) if len(self.carriers) > 1 else None
         self.closing: list[tuple[int, dict[str, Any], Callable[[Any], None]]] = []
 
-    def close_episode(self, k: int, z: Any, event: str | None,
-                      finish: Callable[[Any], None]) -> None:
+    def close_episode(
+        self, k: int, z: Any, event: str | None, finish: Callable[[Any], None]
+    ) -> None:
         """Queue run k's episode end for the next round."""
         body = step_body(z, None, done=True, event=event, shadow=self.shadow)
         self.closing.append((k, body, finish))
@@ -240,11 +276,12 @@ class Lockstep:
     def decide(self, active: list[int], z: list[Any], proposals: list[float]) -> list[Any]:
         """Send the queued episode ends, then one step of every active run."""
         requests = [(k, body) for k, body, _ in self.closing] + [
-            (k, step_body(z[k], proposals[k], shadow=self.shadow)) for k in active]
+            (k, step_body(z[k], proposals[k], shadow=self.shadow)) for k in active
+        ]
         decisions = self._send(requests)
         for (_, _, finish), closing in zip(self.closing, decisions, strict=False):
             finish(closing)
-        answered = decisions[len(self.closing):]
+        answered = decisions[len(self.closing) :]
         self.closing = []
         return answered
 
@@ -266,7 +303,8 @@ class Lockstep:
         sessions = [self.runs[k].shield for k, _ in requests]
         if all(isinstance(s, ShieldSession) for s in sessions):
             return ShieldSession.revise_across(
-                [(s, body) for s, (_, body) in zip(sessions, requests, strict=True)])  # type: ignore[misc]
+                [(s, body) for s, (_, body) in zip(sessions, requests, strict=True)]  # type: ignore[misc]
+            )
         out = []
         for k, body in requests:
             shield = self.runs[k].shield
@@ -284,7 +322,7 @@ class Lockstep:
             answers = [self.carriers[url].revise_many(steps) for url, steps in rounds.items()]
         else:
             answers = BatchShield.revise_across(
-                [(self.carriers[url], steps) for url, steps in rounds.items()], self.pool)
+                [(self.carriers[url], steps) for url, steps in rounds.items()], self.pool
+            )
         decisions = {url: iter(a) for url, a in zip(rounds, answers, strict=True)}
         return [next(decisions[self.service_of[k]]) for k, _ in requests]
-

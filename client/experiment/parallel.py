@@ -39,10 +39,18 @@ def die_with_parent(parent: int) -> None:
             os._exit(1)
 
 
-def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None = None,
-            bar: Progress | None = None, lockstep: int = 0, trace: bool = False,
-            device: str = "cpu", checkpoint_every: float | None = None,
-            deadline: float | None = None) -> int:
+def run_all(
+    config: ExperimentConfig,
+    out: Path,
+    workers: int,
+    token: str | None = None,
+    bar: Progress | None = None,
+    lockstep: int = 0,
+    trace: bool = False,
+    device: str = "cpu",
+    checkpoint_every: float | None = None,
+    deadline: float | None = None,
+) -> int:
     """Every (arm, run) in its own process, at most ``workers`` at a time. With ``lockstep``
     N > 0 the runs of each DDPG arm go N to a process, each group with one batched update on
     ``device``, saving a checkpoint every ``checkpoint_every`` seconds and stopping (with one)
@@ -58,21 +66,34 @@ def run_all(config: ExperimentConfig, out: Path, workers: int, token: str | None
         if lockstep and parse_arm(arm)[0] == "ddpg":
             for first in range(0, config.runs, lockstep):
                 group = list(range(first, min(first + lockstep, config.runs)))
-                jobs.append((partial(run_lockstep, indices=group, device=device,
-                                     checkpoint_every=checkpoint_every, stop=stop),
-                             (config, arm, out, token)))
+                jobs.append(
+                    (
+                        partial(
+                            run_lockstep,
+                            indices=group,
+                            device=device,
+                            checkpoint_every=checkpoint_every,
+                            stop=stop,
+                        ),
+                        (config, arm, out, token),
+                    )
+                )
         else:
-            jobs.extend((partial(run_one, stop=stop), (config, arm, run, out, token))
-                        for run in range(config.runs))
+            jobs.extend(
+                (partial(run_one, stop=stop), (config, arm, run, out, token))
+                for run in range(config.runs)
+            )
     context = multiprocessing.get_context("spawn")
     manager = SyncManager(ctx=context)
     manager.start(die_with_parent, (os.getpid(),))
-    with manager, ProcessPoolExecutor(
-            workers, mp_context=context, initializer=die_with_parent,
-            initargs=(os.getpid(),)) as pool:
+    with (
+        manager,
+        ProcessPoolExecutor(
+            workers, mp_context=context, initializer=die_with_parent, initargs=(os.getpid(),)
+        ) as pool,
+    ):
         progress = manager.Queue()
-        pending: set[Future[int]] = {pool.submit(job, *args, progress, trace)
-                                     for job, args in jobs}
+        pending: set[Future[int]] = {pool.submit(job, *args, progress, trace) for job, args in jobs}
         appended = 0
         while pending:
             finished, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)

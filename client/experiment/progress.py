@@ -18,12 +18,16 @@ from tqdm import tqdm
 class Progress:
     """Counts finished episodes out of ``total`` (``done`` of them before this start)."""
 
-    def __init__(self, total: int, done: int = 0, every_s: float = 60.0,
-                 stream: TextIO | None = None) -> None:
+    def __init__(
+        self, total: int, done: int = 0, every_s: float = 60.0, stream: TextIO | None = None
+    ) -> None:
         self.total, self.done, self.every_s = total, done, every_s
         self.stream = stream or sys.stderr
-        self._bar = (tqdm(total=total, initial=done, desc="episodes", unit="ep",
-                          file=self.stream) if self.stream.isatty() else None)
+        self._bar = (
+            tqdm(total=total, initial=done, desc="episodes", unit="ep", file=self.stream)
+            if self.stream.isatty()
+            else None
+        )
         self._last = time.monotonic()
         self._last_done = done
         self._first = done
@@ -58,8 +62,10 @@ class Progress:
             eta = f"about {_duration(left / rate * 60)} left"
         else:
             eta = "time left unknown yet"
-        return (f"episodes {self.done:,} of {self.total:,} ({100 * self.done / self.total:.0f}%), "
-                f"{rate:.1f} a minute, {eta}")
+        return (
+            f"episodes {self.done:,} of {self.total:,} ({100 * self.done / self.total:.0f}%), "
+            f"{rate:.1f} a minute, {eta}"
+        )
 
     def _line(self) -> None:
         print(self.line(), file=self.stream, flush=True)
@@ -67,12 +73,19 @@ class Progress:
 
     def __enter__(self) -> Progress:
         if self._bar is None and 0 < self._first < self.total:
-            print(f"going on from {self._first:,} of {self.total:,} episodes already recorded",
-                  file=self.stream, flush=True)
+            print(
+                f"going on from {self._first:,} of {self.total:,} episodes already recorded",
+                file=self.stream,
+                flush=True,
+            )
         return self
 
-    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
-                 trace: TracebackType | None) -> None:
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
         if self._bar is not None:
             self._bar.close()
         elif self.done > self._first:

@@ -65,8 +65,9 @@ def claim(path: Path) -> IO[bytes]:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         handle.close()
-        raise RecordError(f"{path}: another process is writing this run; "
-                          f"stop it or wait for it") from None
+        raise RecordError(
+            f"{path}: another process is writing this run; stop it or wait for it"
+        ) from None
     return handle
 
 
@@ -107,11 +108,15 @@ def start(path: Path, header: dict[str, Any], episodes: int) -> list[EpisodeReco
         raise RecordError(f"{source}: written with another configuration; use another --out")
     before, now = existing_header.get("shield"), header.get("shield")
     if before is not None and now is not None and not same_shield(before, now):
-        raise RecordError(f"{source}: written with another shield configuration (the defaults "
-                          f"have changed since); remove it or use another --out")
+        raise RecordError(
+            f"{source}: written with another shield configuration (the defaults "
+            f"have changed since); remove it or use another --out"
+        )
     if "reward" in header and resolved_reward(existing_header) != header["reward"]:
-        raise RecordError(f"{source}: written with other reward constants (the defaults have "
-                          f"changed since); remove it or use another --out")
+        raise RecordError(
+            f"{source}: written with other reward constants (the defaults have "
+            f"changed since); remove it or use another --out"
+        )
     if source is packed and len(records) < episodes:
         with open(path, "wb") as f:
             f.write(gzip.decompress(packed.read_bytes()))
@@ -178,8 +183,9 @@ def read(path: Path) -> tuple[dict[str, Any], list[EpisodeRecord]]:
 
 def read_all(directory: Path) -> tuple[list[dict[str, Any]], list[EpisodeRecord]]:
     """Every header and episode under ``directory/records``."""
-    files = sorted([*(directory / "records").glob("*.jsonl"),
-                    *(directory / "records").glob("*.jsonl.gz")])
+    files = sorted(
+        [*(directory / "records").glob("*.jsonl"), *(directory / "records").glob("*.jsonl.gz")]
+    )
     if not files:
         raise RecordError(f"{directory}: no record files under records/")
     runs = [path.name.removesuffix(".gz") for path in files]

@@ -58,14 +58,17 @@ def by_hundred(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
     rows = []
     for b in sorted(blocks):
         block = blocks[b]
-        rows.append({
-            "episodes": f"{100 * b + 1}-{max(r.episode for r in block)}",
-            "success_rate": float(np.mean([r.outcome == "success" for r in block])),
-            "large_distance": sum(r.outcome == "large_distance" for r in block),
-            "collision": sum(r.outcome == "collision" for r in block),
-            "interventions_per_episode": float(np.mean(
-                [sum(r.interventions.values()) for r in block])),
-        })
+        rows.append(
+            {
+                "episodes": f"{100 * b + 1}-{max(r.episode for r in block)}",
+                "success_rate": float(np.mean([r.outcome == "success" for r in block])),
+                "large_distance": sum(r.outcome == "large_distance" for r in block),
+                "collision": sum(r.outcome == "collision" for r in block),
+                "interventions_per_episode": float(
+                    np.mean([sum(r.interventions.values()) for r in block])
+                ),
+            }
+        )
     return rows
 
 
@@ -79,21 +82,25 @@ def per_run(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
     for run in sorted({r.run for r in records}):
         mine = sorted((r for r in records if r.run == run), key=lambda r: r.episode)
         late = mine[-LATE:]
-        rows.append({
-            "run": run,
-            "seed": mine[0].seed,
-            "episodes": len(mine),
-            "successes": sum(r.outcome == "success" for r in mine),
-            "large_distance": sum(r.outcome == "large_distance" for r in mine),
-            "collision": sum(r.outcome == "collision" for r in mine),
-            "never_fails_after": max((r.episode for r in mine if r.outcome in FAILURES),
-                                     default=0),
-            "late_episodes": f"{late[0].episode}-{late[-1].episode}",
-            "late_success_rate": float(np.mean([r.outcome == "success" for r in late])),
-            "late_interventions_per_episode": float(np.mean(
-                [sum(r.interventions.values()) for r in late])),
-            "n_states": mine[-1].n_states,
-        })
+        rows.append(
+            {
+                "run": run,
+                "seed": mine[0].seed,
+                "episodes": len(mine),
+                "successes": sum(r.outcome == "success" for r in mine),
+                "large_distance": sum(r.outcome == "large_distance" for r in mine),
+                "collision": sum(r.outcome == "collision" for r in mine),
+                "never_fails_after": max(
+                    (r.episode for r in mine if r.outcome in FAILURES), default=0
+                ),
+                "late_episodes": f"{late[0].episode}-{late[-1].episode}",
+                "late_success_rate": float(np.mean([r.outcome == "success" for r in late])),
+                "late_interventions_per_episode": float(
+                    np.mean([sum(r.interventions.values()) for r in late])
+                ),
+                "n_states": mine[-1].n_states,
+            }
+        )
     return rows
 
 
@@ -158,36 +165,46 @@ def table(summary: dict[str, Any], notes: dict[str, str] | None = None) -> str:
             f"({100 * s['success_rate']:.1f}%) | {s['large_distance']} | {s['collision']} "
             f"| {s['never_fails_after']} | {four(s['speed_difference_mean'])} "
             f"| {four(s['speed_difference_variance'])} | {sum(s['interventions'].values())} "
-            f"({100 * s['revised_share']:.1f}%) |{note}")
+            f"({100 * s['revised_share']:.1f}%) |{note}"
+        )
     return "\n".join(lines)
 
 
 def blocks_table(summary: dict[str, Any]) -> str:
     """Success, failures and interventions per block of 100 episodes, a row per arm and block."""
-    lines = ["| arm | episodes | success | large distance | collision "
-             "| interventions per episode |", "|---|---|---:|---:|---:|---:|"]
+    lines = [
+        "| arm | episodes | success | large distance | collision | interventions per episode |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
     for arm, s in summary.items():
         for b in s["per_100_episodes"]:
-            lines.append(f"| {arm} | {b['episodes']} | {100 * b['success_rate']:.1f}% "
-                         f"| {b['large_distance']} | {b['collision']} "
-                         f"| {b['interventions_per_episode']:.1f} |")
+            lines.append(
+                f"| {arm} | {b['episodes']} | {100 * b['success_rate']:.1f}% "
+                f"| {b['large_distance']} | {b['collision']} "
+                f"| {b['interventions_per_episode']:.1f} |"
+            )
     return "\n".join(lines)
 
 
 def runs_table(summary: dict[str, Any]) -> str:
     """Each run's outcomes, its last episodes and its model's size at the end."""
-    lines = ["| arm | run | seed | episodes | success | large distance | collision | no failure "
-             "after episode | last episodes | success there | interventions per episode there "
-             "| states at the end |", "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|"]
+    lines = [
+        "| arm | run | seed | episodes | success | large distance | collision | no failure "
+        "after episode | last episodes | success there | interventions per episode there "
+        "| states at the end |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|",
+    ]
     for arm, s in summary.items():
         for r in s["per_run"]:
             states = r["n_states"] if "+" in arm else "-"
-            lines.append(f"| {arm} | {r['run']} | {r['seed']} | {r['episodes']} "
-                         f"| {r['successes']} ({100 * r['successes'] / r['episodes']:.1f}%) "
-                         f"| {r['large_distance']} | {r['collision']} "
-                         f"| {r['never_fails_after']} | {r['late_episodes']} "
-                         f"| {100 * r['late_success_rate']:.1f}% "
-                         f"| {r['late_interventions_per_episode']:.1f} | {states} |")
+            lines.append(
+                f"| {arm} | {r['run']} | {r['seed']} | {r['episodes']} "
+                f"| {r['successes']} ({100 * r['successes'] / r['episodes']:.1f}%) "
+                f"| {r['large_distance']} | {r['collision']} "
+                f"| {r['never_fails_after']} | {r['late_episodes']} "
+                f"| {100 * r['late_success_rate']:.1f}% "
+                f"| {r['late_interventions_per_episode']:.1f} | {states} |"
+            )
     return "\n".join(lines)
 
 
@@ -196,25 +213,35 @@ def paper_table(summary: dict[str, Any]) -> str | None:
     arms = [arm for arm in PAPER if arm in summary]
     if not arms:
         return None
-    lines = ["| | episodes | success | large distance | collision | no failure after episode "
-             "| speed difference mean / variance |", "|---|---:|---:|---:|---:|---:|---|"]
+    lines = [
+        "| | episodes | success | large distance | collision | no failure after episode "
+        "| speed difference mean / variance |",
+        "|---|---:|---:|---:|---:|---:|---|",
+    ]
     runs, each = PAPER_EPISODES
     for arm in arms:
         p = PAPER[arm]
         after = "-" if p.never_fails_after is None else p.never_fails_after
         mean, var = p.speed_difference
-        lines.append(f"| paper: {p.name} | {runs} x {each} | {p.successes:,} ({p.percent}%) "
-                     f"| {p.large_distance:,} | {p.collision:,} | {after} "
-                     f"| {mean:.4f} / {var:.4f} |")
+        lines.append(
+            f"| paper: {p.name} | {runs} x {each} | {p.successes:,} ({p.percent}%) "
+            f"| {p.large_distance:,} | {p.collision:,} | {after} "
+            f"| {mean:.4f} / {var:.4f} |"
+        )
     for arm in arms:
         s = summary[arm]
         counts = set(s["episodes_per_run"])
-        episodes = (f"{s['runs']} x {counts.pop()}" if len(counts) == 1
-                    else f"{s['runs']} runs, {s['episodes']:,}")
+        episodes = (
+            f"{s['runs']} x {counts.pop()}"
+            if len(counts) == 1
+            else f"{s['runs']} runs, {s['episodes']:,}"
+        )
         speed = f"{four(s['speed_difference_mean'])} / {four(s['speed_difference_variance'])}"
-        lines.append(f"| this: {arm} | {episodes} | {s['successes']:,} "
-                     f"({100 * s['success_rate']:.1f}%) | {s['large_distance']:,} "
-                     f"| {s['collision']:,} | {s['never_fails_after']} | {speed} |")
+        lines.append(
+            f"| this: {arm} | {episodes} | {s['successes']:,} "
+            f"({100 * s['success_rate']:.1f}%) | {s['large_distance']:,} "
+            f"| {s['collision']:,} | {s['never_fails_after']} | {speed} |"
+        )
     return "\n".join(lines)
 
 
@@ -235,18 +262,29 @@ def side_by_side(summary: dict[str, Any]) -> str:
     """The rows of ``summary`` per block of 100 episodes, side by side in each cell: how
     experiments differ as learning goes on, which the pooled table averages away."""
     names = list(summary)
-    blocks = [{int(b["episodes"].split("-")[0]): b for b in s["per_100_episodes"]}
-              for s in summary.values()]
-    columns = (("success_rate", "{:.1%}"), ("large_distance", "{}"), ("collision", "{}"),
-               ("interventions_per_episode", "{:.1f}"))
-    lines = [f"Per block of 100 episodes, each cell {' / '.join(names)}:", "",
-             "| episodes | success | large distance | collision | interventions per episode |",
-             "|---|---|---|---|---|"]
+    blocks = [
+        {int(b["episodes"].split("-")[0]): b for b in s["per_100_episodes"]}
+        for s in summary.values()
+    ]
+    columns = (
+        ("success_rate", "{:.1%}"),
+        ("large_distance", "{}"),
+        ("collision", "{}"),
+        ("interventions_per_episode", "{:.1f}"),
+    )
+    lines = [
+        f"Per block of 100 episodes, each cell {' / '.join(names)}:",
+        "",
+        "| episodes | success | large distance | collision | interventions per episode |",
+        "|---|---|---|---|---|",
+    ]
     for start in sorted(set().union(*blocks)):
         cells = [b.get(start) for b in blocks]
         spans = " / ".join(dict.fromkeys(c["episodes"] for c in cells if c is not None))
-        values = [" / ".join("-" if c is None else form.format(c[key]) for c in cells)
-                  for key, form in columns]
+        values = [
+            " / ".join("-" if c is None else form.format(c[key]) for c in cells)
+            for key, form in columns
+        ]
         lines.append(f"| {spans} | {' | '.join(values)} |")
     return "\n".join(lines)
 
@@ -259,6 +297,7 @@ def parting(first: list[EpisodeRecord], other: list[EpisodeRecord]) -> dict[tupl
     agree on all N episodes both hold, "other seed" where the two were seeded apart (not the
     same run), "-" where ``other`` lacks the run. Paired ablations share their seeds, so a
     switch shows first where its run parts."""
+
     def runs(episodes: list[EpisodeRecord]) -> dict[tuple[str, int], list[EpisodeRecord]]:
         grouped: dict[tuple[str, int], list[EpisodeRecord]] = defaultdict(list)
         for r in sorted(episodes, key=lambda r: (r.arm, r.run, r.episode)):
@@ -286,16 +325,21 @@ def parting(first: list[EpisodeRecord], other: list[EpisodeRecord]) -> dict[tupl
 def partings_table(names: list[str], episodes: list[list[EpisodeRecord]]) -> str:
     """Where each run of the later experiments parts from the same run of the first."""
     columns = [parting(episodes[0], other) for other in episodes[1:]]
-    lines = [f"Where each run parts from the same run of {names[0]} (the first episode of "
-             "another length, outcome or revisions):", "",
-             f"| arm | run | {' | '.join(names[1:])} |", "|---|---:|" + "---:|" * len(columns)]
+    lines = [
+        f"Where each run parts from the same run of {names[0]} (the first episode of "
+        "another length, outcome or revisions):",
+        "",
+        f"| arm | run | {' | '.join(names[1:])} |",
+        "|---|---:|" + "---:|" * len(columns),
+    ]
     for arm, run in columns[0]:
         lines.append(f"| {arm} | {run} | {' | '.join(c[(arm, run)] for c in columns)} |")
     return "\n".join(lines)
 
 
-def compare(directories: list[Path], limit: int | None = None, blocks: bool = False,
-            partings: bool = False) -> str:
+def compare(
+    directories: list[Path], limit: int | None = None, blocks: bool = False, partings: bool = False
+) -> str:
     """One table over several experiments (ablations): a row per directory and arm, with the
     shield configuration each was run with; of each run's first ``limit`` episodes, if
     given; with ``blocks``, also the rows per block of 100 episodes side by side; with
@@ -344,15 +388,23 @@ def figure(episodes: list[EpisodeRecord], path: Path) -> None:
             revisions[runs.index(r.run), r.episode - 1] = sum(r.interventions.values())
         x = np.arange(1, length + 1)
         steps_ax.plot(x, np.nanmean(steps, axis=0), label=arm, linewidth=1, color=colour)
-        steps_ax.fill_between(x, np.nanmin(steps, axis=0), np.nanmax(steps, axis=0),
-                              color=colour, alpha=0.15)
+        steps_ax.fill_between(
+            x, np.nanmin(steps, axis=0), np.nanmax(steps, axis=0), color=colour, alpha=0.15
+        )
         if np.nansum(revisions) > 0:
-            revisions_ax.plot(x, np.nanmean(revisions, axis=0), label=arm, linewidth=1,
-                              color=colour)
-    steps_ax.set(xlabel="episode", ylabel="steps (800 = success)",
-                 title="Steps per episode: mean, range over runs")
-    revisions_ax.set(xlabel="episode", ylabel="revised actions",
-                     title="Interventions per episode (mean over runs)")
+            revisions_ax.plot(
+                x, np.nanmean(revisions, axis=0), label=arm, linewidth=1, color=colour
+            )
+    steps_ax.set(
+        xlabel="episode",
+        ylabel="steps (800 = success)",
+        title="Steps per episode: mean, range over runs",
+    )
+    revisions_ax.set(
+        xlabel="episode",
+        ylabel="revised actions",
+        title="Interventions per episode (mean over runs)",
+    )
     for ax in (steps_ax, revisions_ax):
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
@@ -369,11 +421,13 @@ def first_episodes(episodes: list[EpisodeRecord], limit: int) -> list[EpisodeRec
     counts: dict[tuple[str, int], int] = defaultdict(int)
     for r in episodes:
         counts[(r.arm, r.run)] += 1
-    (arm, run), fewest = min(counts.items(), key=lambda item: (item[1], item[0]),
-                             default=(("", 0), limit))
+    (arm, run), fewest = min(
+        counts.items(), key=lambda item: (item[1], item[0]), default=(("", 0), limit)
+    )
     if fewest < limit:
-        raise RecordError(f"run {run} of {arm} has only {fewest} episodes; "
-                          f"--episodes must be at most {fewest}")
+        raise RecordError(
+            f"run {run} of {arm} has only {fewest} episodes; --episodes must be at most {fewest}"
+        )
     return [r for r in episodes if r.episode <= limit]
 
 
@@ -386,12 +440,18 @@ def write(directory: Path, limit: int | None = None) -> tuple[str, dict[str, Any
     if limit is not None:
         episodes = first_episodes(episodes, limit)
     summary = summarise(episodes)
-    summary_doc = {"arms": summary, "config": headers[0]["config"],
-                   "versions": headers[0]["versions"], "episode_limit": limit}
+    summary_doc = {
+        "arms": summary,
+        "config": headers[0]["config"],
+        "versions": headers[0]["versions"],
+        "episode_limit": limit,
+    }
     (directory / "summary.json").write_text(json.dumps(summary_doc, indent=2))
-    text = f"{table(summary)}\n\nPer block of 100 episodes, all runs together:\n\n" \
-           f"{blocks_table(summary)}\n\nPer run (its last {LATE} episodes on the right):\n\n" \
-           f"{runs_table(summary)}"
+    text = (
+        f"{table(summary)}\n\nPer block of 100 episodes, all runs together:\n\n"
+        f"{blocks_table(summary)}\n\nPer run (its last {LATE} episodes on the right):\n\n"
+        f"{runs_table(summary)}"
+    )
     beside = paper_table(summary)
     if beside is not None:
         text += f"\n\nBeside the paper's result (its section 5):\n\n{beside}"

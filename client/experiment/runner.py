@@ -76,8 +76,9 @@ class ExperimentConfig:
         return urls[run % len(urls)]
 
     def to_dict(self) -> dict[str, Any]:
-        return {k: list(v) if isinstance(v, tuple) else v
-                for k, v in dataclasses.asdict(self).items()}
+        return {
+            k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()
+        }
 
     def identity(self) -> dict[str, Any]:
         """What makes the results: everything but where the shield runs and how it is
@@ -89,8 +90,10 @@ def parse_arm(arm: str) -> tuple[str, str | None]:
     """``controller`` or ``controller+shield`` / ``controller+shadow``."""
     controller, _, mode = arm.partition("+")
     if controller not in CONTROLLERS or (mode and mode not in MODES):
-        raise ValueError(f"unknown arm {arm!r}: a controller of {', '.join(CONTROLLERS)}, "
-                         f"alone or with +shield or +shadow")
+        raise ValueError(
+            f"unknown arm {arm!r}: a controller of {', '.join(CONTROLLERS)}, "
+            f"alone or with +shield or +shadow"
+        )
     return controller, mode or None
 
 
@@ -110,20 +113,23 @@ def versions() -> dict[str, str]:
     import gymnasium
     import torch
 
-    return {"shield": app.__version__, "core": compiled.version(),
-            "python": platform.python_version(),
-            "numpy": np.__version__, "torch": torch.__version__,
-            "gymnasium": gymnasium.__version__,
-            "cpu": f"{processor()} (torch {torch.backends.cpu.get_cpu_capability()}, "
-                   f"numpy {numpy_simd()})"}
+    return {
+        "shield": app.__version__,
+        "core": compiled.version(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "torch": torch.__version__,
+        "gymnasium": gymnasium.__version__,
+        "cpu": f"{processor()} (torch {torch.backends.cpu.get_cpu_capability()}, "
+        f"numpy {numpy_simd()})",
+    }
 
 
 def processor() -> str:
     """The processor's model name, where the system tells it."""
     try:
         with open("/proc/cpuinfo") as f:
-            names = [line.partition(":")[2].strip() for line in f
-                     if line.startswith("model name")]
+            names = [line.partition(":")[2].strip() for line in f if line.startswith("model name")]
     except OSError:
         names = []
     return names[0] if names else platform.processor() or platform.machine()
@@ -155,22 +161,28 @@ def replay_mismatch(path: Path, episode: int) -> str:
 
     causes = []
     if differs("core"):
-        causes.append(f"the e-FSM has changed since (core {written['core']} there, "
-                      f"{here['core']} here)")
+        causes.append(
+            f"the e-FSM has changed since (core {written['core']} there, {here['core']} here)"
+        )
     if differs("cpu"):
         there = written.get("cpu", "a processor not recorded")
-        causes.append(f"the hardware differs (written on {there}, replayed on {here['cpu']}): "
-                      f"the controller's arithmetic follows the CPU")
-    libraries = [f"{name} {written.get(name, 'not recorded')} there, {value} here"
-                 for name, value in here.items()
-                 if name not in ("core", "cpu") and written.get(name) != value]
+        causes.append(
+            f"the hardware differs (written on {there}, replayed on {here['cpu']}): "
+            f"the controller's arithmetic follows the CPU"
+        )
+    libraries = [
+        f"{name} {written.get(name, 'not recorded')} there, {value} here"
+        for name, value in here.items()
+        if name not in ("core", "cpu") and written.get(name) != value
+    ]
     if libraries:
         causes.append(f"the libraries differ ({'; '.join(libraries)}): their arithmetic may too")
     if not causes:
-        causes.append("written with these libraries on this processor: the code has changed "
-                      "since")
-    return (f"{path}: episode {episode} did not replay identically ({'; '.join(causes)}); go "
-            f"on where it was written, or start again with another --out")
+        causes.append("written with these libraries on this processor: the code has changed since")
+    return (
+        f"{path}: episode {episode} did not replay identically ({'; '.join(causes)}); go "
+        f"on where it was written, or start again with another --out"
+    )
 
 
 class Controller(Protocol):
@@ -196,8 +208,14 @@ def shield_config(config: ExperimentConfig, seed: int) -> ShieldConfig:
     return ShieldConfig.from_dict(overrides)
 
 
-def make_shield(config: ExperimentConfig, arm: str, run: int, seed: int,
-                token: str | None, model: Any | None = None) -> StepShield:
+def make_shield(
+    config: ExperimentConfig,
+    arm: str,
+    run: int,
+    seed: int,
+    token: str | None,
+    model: Any | None = None,
+) -> StepShield:
     """A fresh, empty model for this run, or the model ``model`` (the exact state that
     :func:`model_state` gave)."""
     resolved = shield_config(config, seed)
@@ -221,8 +239,9 @@ def make_shield(config: ExperimentConfig, arm: str, run: int, seed: int,
     return ShieldSession(url, token=token, model=name)
 
 
-def model_state(config: ExperimentConfig, arm: str, run: int, shield: StepShield,
-                token: str | None) -> Any:
+def model_state(
+    config: ExperimentConfig, arm: str, run: int, shield: StepShield, token: str | None
+) -> Any:
     """The exact state of the run's model, as the service's snapshot gives it."""
     if isinstance(shield, LocalShield):
         return codec.to_json(shield.shield.snapshot())
@@ -267,9 +286,14 @@ class EpisodeMeter:
         }
 
 
-def play(env: Any, agent: Controller, obs: Any, learner: Any | None,
-         trace: Callable[[float, dict[str, Any]], None] | None = None,
-         pool: Executor | None = None) -> tuple[dict[str, Any], Any]:
+def play(
+    env: Any,
+    agent: Controller,
+    obs: Any,
+    learner: Any | None,
+    trace: Callable[[float, dict[str, Any]], None] | None = None,
+    pool: Executor | None = None,
+) -> tuple[dict[str, Any], Any]:
     """One episode; returns its measurements and the last observation. ``trace`` sees each
     step's proposal and info. A learner that updates first (``update_first``) updates
     while ``pool``, if given, steps the environment and its shield."""
@@ -281,7 +305,8 @@ def play(env: Any, agent: Controller, obs: Any, learner: Any | None,
         action = np.array([proposed], np.float32)
         if first:
             next_obs, reward, terminated, truncated, info = while_updating(
-                learner, pool, env.step, action)
+                learner, pool, env.step, action
+            )
         else:
             next_obs, reward, terminated, truncated, info = env.step(action)
         if trace is not None:
@@ -297,8 +322,7 @@ def play(env: Any, agent: Controller, obs: Any, learner: Any | None,
     return meter.result(info), obs
 
 
-def while_updating(learner: Any, pool: Executor | None, work: Callable[..., T],
-                   *args: Any) -> T:
+def while_updating(learner: Any, pool: Executor | None, work: Callable[..., T], *args: Any) -> T:
     """``work(*args)`` and one update of ``learner``: at once where ``pool`` runs the work
     (a remote shield's answer is mostly waiting), else the update first. Both orders give the
     same result: the work does not touch the learner."""
@@ -337,9 +361,18 @@ class Run:
     trace: TraceWriter | None = None
 
     @classmethod
-    def open(cls, config: ExperimentConfig, arm: str, index: int, out: Path,
-             token: str | None, wrap: bool = True, trace: bool = False,
-             learning: dict[str, Any] | None = None, model: Any | None = None) -> Run:
+    def open(
+        cls,
+        config: ExperimentConfig,
+        arm: str,
+        index: int,
+        out: Path,
+        token: str | None,
+        wrap: bool = True,
+        trace: bool = False,
+        learning: dict[str, Any] | None = None,
+        model: Any | None = None,
+    ) -> Run:
         """Open the run's records and environment; ``wrap=False`` leaves the shield (if any)
         to the caller instead of putting it in front of the environment; with ``trace`` a
         shielded run also writes its step trace. ``learning`` says how the learner ran
@@ -349,16 +382,23 @@ class Run:
         path = records.path_for(out, arm, index)
         identity = config.identity()
         _, mode = parse_arm(arm)
-        header = {"config": config.to_dict(), "identity": identity, "arm": arm, "run": index,
-                  "seed": seed, "versions": versions(),
-                  "shield": shield_config(config, seed).to_dict() if mode else None,
-                  "reward": asdict(RewardConfig(**config.reward)),
-                  "learning": learning or {"lockstep": False, "device": "cpu"}}
+        header = {
+            "config": config.to_dict(),
+            "identity": identity,
+            "arm": arm,
+            "run": index,
+            "seed": seed,
+            "versions": versions(),
+            "shield": shield_config(config, seed).to_dict() if mode else None,
+            "reward": asdict(RewardConfig(**config.reward)),
+            "learning": learning or {"lockstep": False, "device": "cpu"},
+        }
         claim = records.claim(path)
         try:  # a refused file or an unreachable shield releases the run's file at once
             recorded = records.start(path, header, config.episodes)
-            env: Any = CarFollowingEnv(lead=profiles(config.lead),
-                                       reward=RewardConfig(**config.reward))
+            env: Any = CarFollowingEnv(
+                lead=profiles(config.lead), reward=RewardConfig(**config.reward)
+            )
             shield = None
             if mode and (len(recorded) < config.episodes or model is not None):
                 shield = make_shield(config, arm, index, seed, token, model)
@@ -368,18 +408,21 @@ class Run:
             records.release(claim, path)
             raise
         writer = TraceWriter(out, arm, index) if trace and shield is not None else None
-        return cls(config, arm, index, seed, path, recorded, env, shield, claim, token,
-                   trace=writer)
+        return cls(
+            config, arm, index, seed, path, recorded, env, shield, claim, token, trace=writer
+        )
 
     @property
     def complete(self) -> bool:
         return len(self.recorded) >= self.config.episodes
 
-    def finish(self, episode: int, measured: dict[str, Any], wall_s: float,
-               progress: Any | None) -> None:
+    def finish(
+        self, episode: int, measured: dict[str, Any], wall_s: float, progress: Any | None
+    ) -> None:
         """Check a replayed episode against its record, or append a new one."""
-        record = EpisodeRecord(arm=self.arm, run=self.index, episode=episode, seed=self.seed,
-                               wall_s=wall_s, **measured)
+        record = EpisodeRecord(
+            arm=self.arm, run=self.index, episode=episode, seed=self.seed, wall_s=wall_s, **measured
+        )
         if episode <= len(self.recorded):
             old = self.recorded[episode - 1]
             if not records.same_course(old, record):
@@ -423,9 +466,16 @@ def torch_for_one_core() -> None:
     torch.use_deterministic_algorithms(True)
 
 
-def run_one(config: ExperimentConfig, arm: str, run: int, out: Path, token: str | None = None,
-            progress: Any | None = None, trace: bool = False,
-            stop: Callable[[], bool] | None = None) -> int:
+def run_one(
+    config: ExperimentConfig,
+    arm: str,
+    run: int,
+    out: Path,
+    token: str | None = None,
+    progress: Any | None = None,
+    trace: bool = False,
+    stop: Callable[[], bool] | None = None,
+) -> int:
     """Play one run to ``config.episodes``, or until ``stop`` (asked after every episode) says
     to stop, and keep its shield model (:meth:`Run.keep_model`); returns the number of
     episodes appended. A stopped run goes on by replaying what it recorded."""

@@ -51,11 +51,18 @@ class TraceWriter:
 
     def add(self, episode: int, z: list[float], proposed: float, d: dict[str, Any]) -> None:
         """One step: its observation, the proposal and the decision record (as data)."""
-        row = {"e": episode, "z": [round(v, 2) for v in z], "p": round(proposed, 3),
-               "a": None if d["action"] is None else round(d["action"], 3), "r": d["reason"],
-               "v": d["verdict"], "risk": {k: round(v, 4) for k, v in d["risk"].items()},
-               "t": None if d["threshold"] is None else round(d["threshold"], 4),
-               "s": d["state"], "n": d["n_states"]}
+        row = {
+            "e": episode,
+            "z": [round(v, 2) for v in z],
+            "p": round(proposed, 3),
+            "a": None if d["action"] is None else round(d["action"], 3),
+            "r": d["reason"],
+            "v": d["verdict"],
+            "risk": {k: round(v, 4) for k, v in d["risk"].items()},
+            "t": None if d["threshold"] is None else round(d["threshold"], 4),
+            "s": d["state"],
+            "n": d["n_states"],
+        }
         self._file.write(json.dumps(row, separators=(",", ":")) + "\n")
 
     def close(self) -> None:
@@ -67,8 +74,7 @@ def read(path: Path) -> list[dict[str, Any]]:
         with gzip.open(path, "rt", encoding="utf-8") as handle:
             return [json.loads(line) for line in handle]
     except (OSError, EOFError, ValueError) as error:
-        raise RecordError(f"{path}: damaged trace ({error}); run the experiment again") \
-            from error
+        raise RecordError(f"{path}: damaged trace ({error}); run the experiment again") from error
 
 
 def analyse(directory: Path) -> str:
@@ -95,8 +101,9 @@ def analyse(directory: Path) -> str:
     parts = []
     for arm, episodes in by_arm.items():
         active = [e for e in episodes if e[0]["r"] in ACTIVE]
-        parts.append(f"## {arm}: {len(active)} episodes with the reviser on "
-                     f"(of {len(episodes)} traced)\n")
+        parts.append(
+            f"## {arm}: {len(active)} episodes with the reviser on (of {len(episodes)} traced)\n"
+        )
         criteria = list(episodes[0][0]["risk"])  # every decision names every criterion
         parts.append(_reasons(episodes))
         parts.append(_by_headway([s for e in active for s in e], criteria))
@@ -124,8 +131,11 @@ def _reasons(episodes: list[list[dict[str, Any]]]) -> str:
 
 
 def _by_headway(steps: list[dict[str, Any]], criteria: list[str]) -> str:
-    head = "| headway (m) | steps | " + " | ".join(
-        f"revised against {c} | predicted {c} risk p50 / p90" for c in criteria) + " |"
+    head = (
+        "| headway (m) | steps | "
+        + " | ".join(f"revised against {c} | predicted {c} risk p50 / p90" for c in criteria)
+        + " |"
+    )
     lines = [head, "|---|---:|" + "---:|---:|" * len(criteria)]
     for low, high in HEADWAY_BANDS:
         band = [s for s in steps if s["z"][1] >= low and (high is None or s["z"][1] < high)]
@@ -142,22 +152,29 @@ def _by_headway(steps: list[dict[str, Any]], criteria: list[str]) -> str:
 
 
 def _before_failures(episodes: list[list[dict[str, Any]]], criteria: list[str]) -> str:
-    lines = [f"| failure | episodes | revised against it in the last {LOOKBACK} steps | "
-             f"its predicted risk at or above the threshold there | median of its highest "
-             f"predicted risk there |", "|---|---:|---:|---:|---:|"]
+    lines = [
+        f"| failure | episodes | revised against it in the last {LOOKBACK} steps | "
+        f"its predicted risk at or above the threshold there | median of its highest "
+        f"predicted risk there |",
+        "|---|---:|---:|---:|---:|",
+    ]
     for criterion in criteria:
         failed = [e for e in episodes if e[-1]["outcome"] == criterion]
         if not failed:
             continue
         tails = [e[-LOOKBACK:] for e in failed]
-        revised = sum(any(s["v"] == criterion and s["r"].startswith("revised") for s in t)
-                      for t in tails)
-        above = sum(any(s["t"] is not None and s["risk"][criterion] >= s["t"] for s in t)
-                    for t in tails)
+        revised = sum(
+            any(s["v"] == criterion and s["r"].startswith("revised") for s in t) for t in tails
+        )
+        above = sum(
+            any(s["t"] is not None and s["risk"][criterion] >= s["t"] for s in t) for t in tails
+        )
         peak = float(np.median([max(s["risk"][criterion] for s in t) for t in tails]))
         n = len(failed)
-        lines.append(f"| {criterion} | {n} | {revised} ({100 * revised / n:.0f}%) | "
-                     f"{above} ({100 * above / n:.0f}%) | {peak:.3f} |")
+        lines.append(
+            f"| {criterion} | {n} | {revised} ({100 * revised / n:.0f}%) | "
+            f"{above} ({100 * above / n:.0f}%) | {peak:.3f} |"
+        )
     return "Before each failure:\n\n" + "\n".join(lines) + "\n"
 
 
@@ -165,21 +182,30 @@ def _revision_sizes(episodes: list[list[dict[str, Any]]], criteria: list[str]) -
     """How far the applied revisions moved the action from the proposal, over all decisions
     and in the last steps before each failure: the revision noise, cut at the proposal by
     one-sided revisions, can leave a revision next to the proposal."""
-    lines = ["| revisions against | where | revisions | median of applied - proposed (m/s^2) | "
-             f"applied within {NEAR} m/s^2 of the proposal |", "|---|---|---:|---:|---:|"]
+    lines = [
+        "| revisions against | where | revisions | median of applied - proposed (m/s^2) | "
+        f"applied within {NEAR} m/s^2 of the proposal |",
+        "|---|---|---:|---:|---:|",
+    ]
     for criterion in criteria:
         tails = [e[-LOOKBACK:] for e in episodes if e[-1]["outcome"] == criterion]
-        for where, steps in (("every step", [s for e in episodes for s in e]),
-                             (f"the last {LOOKBACK} steps before a {criterion}",
-                              [s for t in tails for s in t])):
-            moved = [s["a"] - s["p"] for s in steps
-                     if s["v"] == criterion and s["r"].startswith("revised")]
+        for where, steps in (
+            ("every step", [s for e in episodes for s in e]),
+            (f"the last {LOOKBACK} steps before a {criterion}", [s for t in tails for s in t]),
+        ):
+            moved = [
+                s["a"] - s["p"]
+                for s in steps
+                if s["v"] == criterion and s["r"].startswith("revised")
+            ]
             if not moved:
                 continue
             near = sum(abs(m) <= NEAR for m in moved)
-            lines.append(f"| {criterion} | {where} | {len(moved)} | "
-                         f"{float(np.median(moved)):+.3f} | "
-                         f"{near} ({100 * near / len(moved):.0f}%) |")
+            lines.append(
+                f"| {criterion} | {where} | {len(moved)} | "
+                f"{float(np.median(moved)):+.3f} | "
+                f"{near} ({100 * near / len(moved):.0f}%) |"
+            )
     return "How far the revisions moved the action:\n\n" + "\n".join(lines) + "\n"
 
 
@@ -187,8 +213,7 @@ def _failure_states(episodes: list[list[dict[str, Any]]], criteria: list[str]) -
     """Per run, the states the failures came from (the state of each failed episode's last
     decision) against how often each was recognised: a state whose failures are a small share
     of the entries into it is not flagged by count-based flags."""
-    recognised: Counter[tuple[int, int]] = Counter(
-        (s["run"], s["s"]) for e in episodes for s in e)
+    recognised: Counter[tuple[int, int]] = Counter((s["run"], s["s"]) for e in episodes for s in e)
     failures: dict[tuple[int, int], Counter[str]] = defaultdict(Counter)
     for e in episodes:
         if e[-1]["outcome"] in criteria:
@@ -198,10 +223,16 @@ def _failure_states(episodes: list[list[dict[str, Any]]], criteria: list[str]) -
     revised = Counter(s["run"] for e in episodes for s in e if s["r"].startswith("revised"))
     for run, state in sorted(failures):
         counts = failures[(run, state)]
-        lines.append(f"| {run} | {state} | {recognised[(run, state)]} | "
-                     + " | ".join(str(counts[c]) for c in criteria) + f" | {revised[run]} |")
-    return "Where the failures came from (the state of each failed episode's last decision):\n\n" \
-        + "\n".join(lines) + "\n"
+        lines.append(
+            f"| {run} | {state} | {recognised[(run, state)]} | "
+            + " | ".join(str(counts[c]) for c in criteria)
+            + f" | {revised[run]} |"
+        )
+    return (
+        "Where the failures came from (the state of each failed episode's last decision):\n\n"
+        + "\n".join(lines)
+        + "\n"
+    )
 
 
 def _examples(episodes: list[list[dict[str, Any]]], criteria: list[str]) -> str:
@@ -209,14 +240,18 @@ def _examples(episodes: list[list[dict[str, Any]]], criteria: list[str]) -> str:
     for criterion in criteria:
         for e in [e for e in episodes if e[-1]["outcome"] == criterion][:EXAMPLES]:
             out.append(f"The last steps of episode {e[0]['e']} ({criterion}):\n")
-            out.append("| v_ego | headway | v_lead | proposed | applied | decision | "
-                       f"{criterion} risk | threshold | state |")
+            out.append(
+                "| v_ego | headway | v_lead | proposed | applied | decision | "
+                f"{criterion} risk | threshold | state |"
+            )
             out.append("|---:|---:|---:|---:|---:|---|---:|---:|---:|")
             for s in e[-LOOKBACK:]:
                 v, h, vl = s["z"]
                 threshold = "-" if s["t"] is None else f"{s['t']:.3f}"
-                out.append(f"| {v:.1f} | {h:.1f} | {vl:.1f} | {s['p']:+.2f} | {s['a']:+.2f} | "
-                           f"{s['r']} | {s['risk'][criterion]:.3f} | {threshold} | "
-                           f"{s['s']} of {s['n']} |")
+                out.append(
+                    f"| {v:.1f} | {h:.1f} | {vl:.1f} | {s['p']:+.2f} | {s['a']:+.2f} | "
+                    f"{s['r']} | {s['risk'][criterion]:.3f} | {threshold} | "
+                    f"{s['s']} of {s['n']} |"
+                )
             out.append("")
     return "\n".join(out)

@@ -44,16 +44,28 @@ def worth_retrying(error: Exception) -> bool:
     was unavailable for the moment (503, except a model set aside for damaged files)."""
     if isinstance(error, ShieldUnavailable):
         return True
-    return (isinstance(error, ShieldAPIError) and error.status == 503
-            and error.code != "model_quarantined")
+    return (
+        isinstance(error, ShieldAPIError)
+        and error.status == 503
+        and error.code != "model_quarantined"
+    )
 
 
 def step_body(observation: Sequence[float], action: float | None, **options: Any) -> dict[str, Any]:
     """A step's JSON body; options with their default value are left out."""
-    body: dict[str, Any] = {"observation": [float(v) for v in observation],
-                            "action": None if action is None else float(action)}
-    defaults = {"stream": "0", "event": None, "done": False, "applied_action": None,
-                "learn": True, "shadow": False, "idempotency_key": None}
+    body: dict[str, Any] = {
+        "observation": [float(v) for v in observation],
+        "action": None if action is None else float(action),
+    }
+    defaults = {
+        "stream": "0",
+        "event": None,
+        "done": False,
+        "applied_action": None,
+        "learn": True,
+        "shadow": False,
+        "idempotency_key": None,
+    }
     for key, value in options.items():
         if key not in defaults:
             raise TypeError(f"unknown step option {key!r}")
@@ -103,8 +115,15 @@ class ShieldClient:
     """Synchronous HTTP client (keep-alive); with ``retry``, steps are keyed and sent again
     when their answer does not come."""
 
-    def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
-                 timeout: float = DEFAULT_TIMEOUT, retry: Retry | None = None) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        token: str | None = None,
+        model: str | None = None,
+        timeout: float = DEFAULT_TIMEOUT,
+        retry: Retry | None = None,
+    ) -> None:
         self.model = model
         self.retry = retry
         self._http = httpx.Client(base_url=url, headers=_auth(token), timeout=timeout)
@@ -122,13 +141,15 @@ class ShieldClient:
         try:
             response = self._http.send(request)
         except httpx.TransportError as error:
-            raise ShieldUnavailable(f"shield at {self._http.base_url} unreachable: {error}") \
-                from error
+            raise ShieldUnavailable(
+                f"shield at {self._http.base_url} unreachable: {error}"
+            ) from error
         _raise_for(response)
         return response.json() if response.content else None
 
-    def revise(self, observation: Sequence[float], action: float | None,
-               **options: Any) -> Decision:
+    def revise(
+        self, observation: Sequence[float], action: float | None, **options: Any
+    ) -> Decision:
         """One step; options are the API's (stream, event, done, applied_action, learn,
         idempotency_key, ...)."""
         body = step_body(observation, action, **options)
@@ -145,8 +166,9 @@ class ShieldClient:
 
     def snapshot(self, name: str | None = None, **query: Any) -> dict[str, Any]:
         """GET /models/{name} (tpm=..., action=..., exact=...)."""
-        result: dict[str, Any] = self._call("GET", f"/models/{name or self.model or 'default'}",
-                                            params=query)
+        result: dict[str, Any] = self._call(
+            "GET", f"/models/{name or self.model or 'default'}", params=query
+        )
         return result
 
     def restore(self, name: str, snapshot: Mapping[str, Any]) -> dict[str, Any]:
@@ -158,8 +180,9 @@ class ShieldClient:
         return result
 
     def create_model(self, name: str, config: Mapping[str, Any] | None = None) -> dict[str, Any]:
-        result: dict[str, Any] = self._call("POST", "/models",
-                                            json={"name": name, "config": dict(config or {})})
+        result: dict[str, Any] = self._call(
+            "POST", "/models", json={"name": name, "config": dict(config or {})}
+        )
         return result
 
     def delete_model(self, name: str) -> None:
@@ -185,8 +208,15 @@ class ShieldClient:
 class AsyncShieldClient:
     """Asynchronous HTTP client with the same methods, as coroutines."""
 
-    def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
-                 timeout: float = DEFAULT_TIMEOUT, retry: Retry | None = None) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        token: str | None = None,
+        model: str | None = None,
+        timeout: float = DEFAULT_TIMEOUT,
+        retry: Retry | None = None,
+    ) -> None:
         self.model = model
         self.retry = retry
         self._http = httpx.AsyncClient(base_url=url, headers=_auth(token), timeout=timeout)
@@ -195,8 +225,9 @@ class AsyncShieldClient:
     async def _step(self, request: Callable[[], httpx.Request]) -> Any:
         if self.retry is None:
             return await self._send(request())
-        return await call_with_retry_async(lambda: self._send(request()), self.retry,
-                                           worth_retrying)
+        return await call_with_retry_async(
+            lambda: self._send(request()), self.retry, worth_retrying
+        )
 
     async def _call(self, method: str, path: str, **kwargs: Any) -> Any:
         return await self._send(self._http.build_request(method, path, **kwargs))
@@ -205,13 +236,15 @@ class AsyncShieldClient:
         try:
             response = await self._http.send(request)
         except httpx.TransportError as error:
-            raise ShieldUnavailable(f"shield at {self._http.base_url} unreachable: {error}") \
-                from error
+            raise ShieldUnavailable(
+                f"shield at {self._http.base_url} unreachable: {error}"
+            ) from error
         _raise_for(response)
         return response.json() if response.content else None
 
-    async def revise(self, observation: Sequence[float], action: float | None,
-                     **options: Any) -> Decision:
+    async def revise(
+        self, observation: Sequence[float], action: float | None, **options: Any
+    ) -> Decision:
         body = step_body(observation, action, **options)
         if self.retry is not None:
             body = keyed(body)
@@ -225,17 +258,20 @@ class AsyncShieldClient:
 
     async def snapshot(self, name: str | None = None, **query: Any) -> dict[str, Any]:
         result: dict[str, Any] = await self._call(
-            "GET", f"/models/{name or self.model or 'default'}", params=query)
+            "GET", f"/models/{name or self.model or 'default'}", params=query
+        )
         return result
 
     async def models(self) -> list[dict[str, Any]]:
         result: list[dict[str, Any]] = (await self._call("GET", "/models"))["models"]
         return result
 
-    async def create_model(self, name: str,
-                           config: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    async def create_model(
+        self, name: str, config: Mapping[str, Any] | None = None
+    ) -> dict[str, Any]:
         result: dict[str, Any] = await self._call(
-            "POST", "/models", json={"name": name, "config": dict(config or {})})
+            "POST", "/models", json={"name": name, "config": dict(config or {})}
+        )
         return result
 
     async def delete_model(self, name: str) -> None:
@@ -258,13 +294,20 @@ class BatchShield:
     """Steps over the batch route across models: one request per step here, or one request for
     a step of every model with :meth:`revise_many` (lockstep training of several runs)."""
 
-    def __init__(self, url: str, *, token: str | None = None, model: str = "default",
-                 timeout: float = DEFAULT_TIMEOUT) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        token: str | None = None,
+        model: str = "default",
+        timeout: float = DEFAULT_TIMEOUT,
+    ) -> None:
         self.model = model
         self._client = ShieldClient(url, token=token, timeout=timeout)
 
-    def revise(self, observation: Sequence[float], action: float | None,
-               **options: Any) -> Decision:
+    def revise(
+        self, observation: Sequence[float], action: float | None, **options: Any
+    ) -> Decision:
         return self.revise_many([(self.model, step_body(observation, action, **options))])[0]
 
     def revise_many(self, steps: Sequence[tuple[str, dict[str, Any]]]) -> list[Decision]:
@@ -272,8 +315,10 @@ class BatchShield:
         return self._client.revise_batch([{**body, "model": model} for model, body in steps])
 
     @staticmethod
-    def revise_across(rounds: Sequence[tuple[BatchShield, Sequence[tuple[str, dict[str, Any]]]]],
-                      pool: ThreadPoolExecutor) -> list[list[Decision]]:
+    def revise_across(
+        rounds: Sequence[tuple[BatchShield, Sequence[tuple[str, dict[str, Any]]]]],
+        pool: ThreadPoolExecutor,
+    ) -> list[list[Decision]]:
         """One :meth:`revise_many` request per shield (each on a service of its own), all in
         flight at once on ``pool``'s threads, so the services work at the same time; the
         answers in the order of ``rounds``, the first error raised after all have come back."""
@@ -293,8 +338,15 @@ class ShieldSession:
     to hand them over: a training loop that asks for every action waits for nothing else.
     """
 
-    def __init__(self, url: str, *, token: str | None = None, model: str | None = None,
-                 timeout: float = DEFAULT_TIMEOUT, retry: Retry | None = None) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        token: str | None = None,
+        model: str | None = None,
+        timeout: float = DEFAULT_TIMEOUT,
+        retry: Retry | None = None,
+    ) -> None:
         ws_url = url.replace("http://", "ws://", 1).replace("https://", "wss://", 1)
         self._url = ws_url.rstrip("/") + ("/ws" if model is None else f"/models/{model}/ws")
         self._header = [f"Authorization: Bearer {token}"] if token else None
@@ -308,14 +360,15 @@ class ShieldSession:
         try:
             # replies are decoded strictly as UTF-8 by recv(); the library's own byte-by-byte
             # check in Python would cost more than the step
-            return websocket.create_connection(ws_url, timeout=self._timeout, header=header,
-                                               skip_utf8_validation=True)
+            return websocket.create_connection(
+                ws_url, timeout=self._timeout, header=header, skip_utf8_validation=True
+            )
         except websocket.WebSocketBadStatusException as error:
             if error.status_code == HTTPStatus.FORBIDDEN:  # refused before the handshake
-                raise ShieldAPIError(error.status_code, "unauthorized",
-                                     "missing or wrong bearer token", None) from error
-            raise ShieldUnavailable(f"shield at {ws_url} refused the session: {error}") \
-                from error
+                raise ShieldAPIError(
+                    error.status_code, "unauthorized", "missing or wrong bearer token", None
+                ) from error
+            raise ShieldUnavailable(f"shield at {ws_url} refused the session: {error}") from error
         except (OSError, websocket.WebSocketException) as error:
             raise ShieldUnavailable(f"shield at {ws_url} unreachable: {error}") from error
 
@@ -336,13 +389,18 @@ class ShieldSession:
     def _decision(reply: dict[str, Any]) -> Decision:
         if "error" in reply:
             e = reply["error"]
-            status = {"unknown_model": 404, "too_large": 413, "model_quarantined": 503,
-                      "shard_unavailable": 503}.get(e["code"], 422)
+            status = {
+                "unknown_model": 404,
+                "too_large": 413,
+                "model_quarantined": 503,
+                "shard_unavailable": 503,
+            }.get(e["code"], 422)
             raise ShieldAPIError(status, e["code"], e["message"], e.get("field"))
         return Decision.from_dict(reply)
 
-    def revise(self, observation: Sequence[float], action: float | None,
-               **options: Any) -> Decision:
+    def revise(
+        self, observation: Sequence[float], action: float | None, **options: Any
+    ) -> Decision:
         body = step_body(observation, action, **options)
         if self.retry is None:
             self._send(json.dumps(body))

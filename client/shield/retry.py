@@ -64,8 +64,9 @@ def keyed(step: Mapping[str, Any]) -> dict[str, Any]:
     return body
 
 
-def call_with_retry(send: Callable[[], T], retry: Retry,
-                    worth_retrying: Callable[[Exception], bool]) -> T:
+def call_with_retry(
+    send: Callable[[], T], retry: Retry, worth_retrying: Callable[[Exception], bool]
+) -> T:
     """``send()`` until it answers, at most ``retry.attempts`` times while its error is
     ``worth_retrying``; the last error raised."""
     for wait in retry.waits():
@@ -78,8 +79,9 @@ def call_with_retry(send: Callable[[], T], retry: Retry,
     return send()
 
 
-async def call_with_retry_async(send: Callable[[], Awaitable[T]], retry: Retry,
-                                worth_retrying: Callable[[Exception], bool]) -> T:
+async def call_with_retry_async(
+    send: Callable[[], Awaitable[T]], retry: Retry, worth_retrying: Callable[[Exception], bool]
+) -> T:
     """:func:`call_with_retry` for a coroutine function."""
     for wait in retry.waits():
         try:

@@ -29,8 +29,15 @@ from stable_baselines3.common.callbacks import BaseCallback
 class AppliedActionReplayBuffer(ReplayBuffer):
     """A :class:`ReplayBuffer` that records the action each environment copy applied."""
 
-    def add(self, obs: np.ndarray, next_obs: np.ndarray, action: np.ndarray,
-            reward: np.ndarray, done: np.ndarray, infos: list[dict[str, Any]]) -> None:
+    def add(
+        self,
+        obs: np.ndarray,
+        next_obs: np.ndarray,
+        action: np.ndarray,
+        reward: np.ndarray,
+        done: np.ndarray,
+        infos: list[dict[str, Any]],
+    ) -> None:
         assert isinstance(self.action_space, spaces.Box)
         low, high = self.action_space.low, self.action_space.high
         action = np.array(action, copy=True).reshape((self.n_envs, self.action_dim))
@@ -50,8 +57,12 @@ class Failures(BaseCallback):
     ``every_s`` seconds of training, so that a long training says how it goes.
     """
 
-    def __init__(self, key: str = "event", report: Callable[[str], object] | None = None,
-                 every_s: float = 30.0) -> None:
+    def __init__(
+        self,
+        key: str = "event",
+        report: Callable[[str], object] | None = None,
+        every_s: float = 30.0,
+    ) -> None:
         super().__init__()
         self.key = key
         self.failures: Counter[str] = Counter()
@@ -80,6 +91,8 @@ class Failures(BaseCallback):
     def progress(self) -> str:
         """One line: steps done of the training's, episodes, failures, revisions, seconds."""
         total = self.model._total_timesteps
-        return (f"{self.num_timesteps}/{total} steps, {self.episodes} episodes, "
-                f"{sum(self.failures.values())} failures {dict(self.failures)}, "
-                f"{self.revised} revised, {time.monotonic() - self._start:.0f} s")
+        return (
+            f"{self.num_timesteps}/{total} steps, {self.episodes} episodes, "
+            f"{sum(self.failures.values())} failures {dict(self.failures)}, "
+            f"{self.revised} revised, {time.monotonic() - self._start:.0f} s"
+        )

@@ -34,14 +34,16 @@ class SpaceMismatch(ValueError):
 def one_dimensional(space: gym.Space[Any]) -> gym.spaces.Box:
     """The action space, if the shield can revise it: a Box of one finite number."""
     if not isinstance(space, gym.spaces.Box):
-        raise SpaceMismatch(f"the shield revises a continuous Box action, not {space}",
-                            "action_space")
+        raise SpaceMismatch(
+            f"the shield revises a continuous Box action, not {space}", "action_space"
+        )
     if int(np.prod(space.shape)) != 1:
         raise SpaceMismatch(
             f"the shield revises one action dimension; this action has shape {space.shape}. "
             "Shield one dimension (wrap the environment so that the others are fixed or "
             "chosen by the controller alone) or use one shield model per dimension",
-            "action_space")
+            "action_space",
+        )
     if not (np.isfinite(space.low).all() and np.isfinite(space.high).all()):
         raise SpaceMismatch("the action's bounds must be finite", "action_space")
     return space
@@ -67,11 +69,16 @@ def own_config(env: AnyEnv) -> ShieldConfig | None:
     return own() if callable(own) else None
 
 
-def config_for(env: AnyEnv,
-               criteria: Mapping[str, str | None | tuple[str | None, Bound]] | None = None, *,
-               bins: int = DEFAULT_BINS, low: Sequence[float] | None = None,
-               high: Sequence[float] | None = None, observations: npt.ArrayLike | None = None,
-               base: ShieldConfig | None = None) -> ShieldConfig:
+def config_for(
+    env: AnyEnv,
+    criteria: Mapping[str, str | None | tuple[str | None, Bound]] | None = None,
+    *,
+    bins: int = DEFAULT_BINS,
+    low: Sequence[float] | None = None,
+    high: Sequence[float] | None = None,
+    observations: npt.ArrayLike | None = None,
+    base: ShieldConfig | None = None,
+) -> ShieldConfig:
     """The shield configuration for ``env`` (or for each copy of a vectorised ``env``).
 
     An environment that knows its shield (a ``shield_config()`` method on the unwrapped
@@ -99,12 +106,18 @@ def config_for(env: AnyEnv,
         if own is not None:
             return own
     if not criteria and isinstance(env, gym.vector.VectorEnv) and not getattr(env, "envs", None):
-        raise SpaceMismatch("the copies of this vectorised environment live in other "
-                            "processes, where their own shield configuration cannot be read: "
-                            "pass config= (their shield_config(), say) or criteria=", "config")
+        raise SpaceMismatch(
+            "the copies of this vectorised environment live in other "
+            "processes, where their own shield configuration cannot be read: "
+            "pass config= (their shield_config(), say) or criteria=",
+            "config",
+        )
     if not criteria:
-        raise SpaceMismatch("name the failures and the action's direction away from each, "
-                            "e.g. criteria={'crash': 'decrease'}", "criteria")
+        raise SpaceMismatch(
+            "name the failures and the action's direction away from each, "
+            "e.g. criteria={'crash': 'decrease'}",
+            "criteria",
+        )
     if not isinstance(space, gym.spaces.Box):
         raise SpaceMismatch(f"the shield observes a Box, not {space}", "observation_space")
     size = int(np.prod(space.shape))
@@ -114,60 +127,80 @@ def config_for(env: AnyEnv,
         lows, highs = sample_range(observations, size)
     for name, given in (("low", low), ("high", high)):
         if given is not None and np.shape(given) != (size,):
-            raise SpaceMismatch(f"{name} needs one bound per observation number ({size}), "
-                                f"not {np.shape(given)}", name)
+            raise SpaceMismatch(
+                f"{name} needs one bound per observation number ({size}), not {np.shape(given)}",
+                name,
+            )
     lows = lows if low is None else np.asarray(low, np.float64)
     highs = highs if high is None else np.asarray(high, np.float64)
     unbounded = [i for i in range(size) if not (np.isfinite(lows[i]) and np.isfinite(highs[i]))]
     if unbounded:
-        which = (f"all {size} of its numbers" if len(unbounded) == size else
-                 f"numbers {unbounded} of its {size} (flattened)")
+        which = (
+            f"all {size} of its numbers"
+            if len(unbounded) == size
+            else f"numbers {unbounded} of its {size} (flattened)"
+        )
         raise SpaceMismatch(
             f"the observation space {space} leaves {which} unbounded, and the shield scales "
             "every number by the range it normally takes: give it, config_for(env, criteria, "
             "low=[...], high=[...]) with one bound per number, or let a sample of "
             "observations give it, config_for(env, criteria, "
             "observations=sample_observations(env)), then ShieldWrapper(env, config=...)",
-            "observation_space")
+            "observation_space",
+        )
     a_low, a_high = float(action.low.reshape(-1)[0]), float(action.high.reshape(-1)[0])
     base = base or ShieldConfig()
     return dataclasses.replace(
         base,
-        observation=ObservationSpec(names=tuple(f"x{i}" for i in range(size)),
-                                    low=tuple(lows.tolist()), high=tuple(highs.tolist()),
-                                    knee=()),
+        observation=ObservationSpec(
+            names=tuple(f"x{i}" for i in range(size)),
+            low=tuple(lows.tolist()),
+            high=tuple(highs.tolist()),
+            knee=(),
+        ),
         action=ActionSpec(low=a_low, high=a_high, step=(a_high - a_low) / bins),
-        criteria=tuple(Criterion(name, *(how if isinstance(how, tuple) else (how,)))
-                       for name, how in criteria.items()),
+        criteria=tuple(
+            Criterion(name, *(how if isinstance(how, tuple) else (how,)))
+            for name, how in criteria.items()
+        ),
     )
 
 
-def sample_range(observations: npt.ArrayLike, size: int
-                 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+def sample_range(
+    observations: npt.ArrayLike, size: int
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Each observation number's range in a sample (rows of ``size`` numbers, or of any shape
     holding ``size``), widened by :data:`SAMPLE_MARGIN` of its span on each side; a number
     that never varied gets a span of its magnitude (at least 1)."""
     try:
         sample = np.asarray(observations, dtype=np.float64)
     except (TypeError, ValueError) as error:
-        raise SpaceMismatch(f"a sample of observations is an array of numbers ({error})",
-                            "observations") from error
+        raise SpaceMismatch(
+            f"a sample of observations is an array of numbers ({error})", "observations"
+        ) from error
     if sample.ndim == 0 or sample.size == 0 or sample.size % size:
-        raise SpaceMismatch(f"a sample of observations holds rows of the observation's {size} "
-                            f"numbers; this one has shape {sample.shape}", "observations")
+        raise SpaceMismatch(
+            f"a sample of observations holds rows of the observation's {size} "
+            f"numbers; this one has shape {sample.shape}",
+            "observations",
+        )
     sample = sample.reshape(-1, size)
     if not np.isfinite(sample).all():
-        raise SpaceMismatch("the sample of observations holds numbers that are not finite",
-                            "observations")
+        raise SpaceMismatch(
+            "the sample of observations holds numbers that are not finite", "observations"
+        )
     lows, highs = sample.min(axis=0), sample.max(axis=0)
     span = highs - lows
     span = np.where(span > 0, span, np.maximum(np.abs(lows), 1.0))
     return lows - SAMPLE_MARGIN * span, highs + SAMPLE_MARGIN * span
 
 
-def sample_observations(env: gym.Env[Any, Any], steps: int = 1000, seed: int = 0,
-                        observation_key: str = "efsm_observation"
-                        ) -> npt.NDArray[np.float64]:
+def sample_observations(
+    env: gym.Env[Any, Any],
+    steps: int = 1000,
+    seed: int = 0,
+    observation_key: str = "efsm_observation",
+) -> npt.NDArray[np.float64]:
     """What the shield would see over ``steps`` steps of random actions (the action space's
     own samples, seeded by ``seed``), one row per step: ``info[observation_key]`` where the
     environment gives one, else the observation. For :func:`config_for`'s ``observations``
@@ -187,8 +220,9 @@ def sample_observations(env: gym.Env[Any, Any], steps: int = 1000, seed: int = 0
     return np.array([np.asarray(row, np.float64).reshape(-1) for row in rows])
 
 
-def check_config(config: ShieldConfig, env: AnyEnv,
-                 observation_key: str = "efsm_observation") -> None:
+def check_config(
+    config: ShieldConfig, env: AnyEnv, observation_key: str = "efsm_observation"
+) -> None:
     """Raise :class:`SpaceMismatch` where ``config`` cannot guard ``env``: actions the
     environment would not accept, or observations of another size (checked here when the
     environment shows the shield its observation itself and lives in this process, at the
@@ -198,11 +232,13 @@ def check_config(config: ShieldConfig, env: AnyEnv,
     a_low, a_high = float(action.low.reshape(-1)[0]), float(action.high.reshape(-1)[0])
     tolerance = 1e-6 * max(1.0, a_high - a_low)
     if config.action.low < a_low - tolerance:
-        raise SpaceMismatch(f"{config.action.low} lies below the environment's {a_low}",
-                            "action.low")
+        raise SpaceMismatch(
+            f"{config.action.low} lies below the environment's {a_low}", "action.low"
+        )
     if config.action.high > a_high + tolerance:
-        raise SpaceMismatch(f"{config.action.high} lies above the environment's {a_high}",
-                            "action.high")
+        raise SpaceMismatch(
+            f"{config.action.high} lies above the environment's {a_high}", "action.high"
+        )
     remote = isinstance(env, gym.vector.VectorEnv) and not getattr(env, "envs", None)
     if not remote and own_config(env) is None and isinstance(space, gym.spaces.Box):
         check_observation(config, int(np.prod(space.shape)), observation_key)
@@ -215,4 +251,5 @@ def check_observation(config: ShieldConfig, size: int, observation_key: str) -> 
             f"the configuration observes {config.observation.size} numbers "
             f"({', '.join(config.observation.names)}), the environment shows {size} "
             f"(its observation, or info[{observation_key!r}] where it gives one)",
-            "observation.names")
+            "observation.names",
+        )

@@ -51,23 +51,35 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
     copies).
     """
 
-    def __init__(self, env: gym.vector.VectorEnv[Any, Any, Any],
-                 shield: StepShield | None = None, *, config: ShieldConfig | None = None,
-                 criteria: Mapping[str, str] | None = None, failure: Failure | None = None,
-                 event_key: str = "event", observation_key: str = "efsm_observation",
-                 stream_prefix: str | None = None, warmup_steps: int = 0,
-                 shadow: bool = False) -> None:
+    def __init__(
+        self,
+        env: gym.vector.VectorEnv[Any, Any, Any],
+        shield: StepShield | None = None,
+        *,
+        config: ShieldConfig | None = None,
+        criteria: Mapping[str, str] | None = None,
+        failure: Failure | None = None,
+        event_key: str = "event",
+        observation_key: str = "efsm_observation",
+        stream_prefix: str | None = None,
+        warmup_steps: int = 0,
+        shadow: bool = False,
+    ) -> None:
         super().__init__(env)
         one_dimensional(env.single_action_space)
         check_failure(failure)
         mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
         if AutoresetMode(mode) != AutoresetMode.NEXT_STEP:
-            raise SpaceMismatch(f"the shield follows copies that reset themselves on the next "
-                                f"step (AutoresetMode.NEXT_STEP, Gymnasium's default), not "
-                                f"{AutoresetMode(mode)}", "autoreset_mode")
+            raise SpaceMismatch(
+                f"the shield follows copies that reset themselves on the next "
+                f"step (AutoresetMode.NEXT_STEP, Gymnasium's default), not "
+                f"{AutoresetMode(mode)}",
+                "autoreset_mode",
+            )
         self._owned = shield is None
-        self.config, self.shield = bind(env, shield, config, criteria, observation_key,
-                                        warmup_steps)
+        self.config, self.shield = bind(
+            env, shield, config, criteria, observation_key, warmup_steps
+        )
         self.failure = failure
         self.event_key = event_key
         self.watch = FailureWatch(failure, event_key, self.config)
@@ -89,8 +101,9 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
         """Evaluation mode: the shield still revises but learns nothing."""
         self.evaluation = on
 
-    def reset(self, *, seed: int | None = None,
-              options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
         for i in range(self.num_envs):
             if self._open[i]:  # an episode left mid-way: its stream ends, no failure learned
                 self._end(i, self._z[i], None)
@@ -118,9 +131,14 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
             z = self._z[i]
             if z is None:  # this step only resets copy i: its action is ignored
                 continue
-            decision = self.shield.revise(z, float(proposed[i]), stream=self.streams[i],
-                                          event=self._event[i], shadow=shadow,
-                                          learn=not self.evaluation)
+            decision = self.shield.revise(
+                z,
+                float(proposed[i]),
+                stream=self.streams[i],
+                event=self._event[i],
+                shadow=shadow,
+                learn=not self.evaluation,
+            )
             assert decision.action is not None
             applied[i], records[i] = decision.action, decision.to_dict()
             self._open[i], self._event[i] = True, None
@@ -134,8 +152,15 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
                 self._z[i] = self._observe(observations, infos, i)
                 continue
             info = _one(infos, i)
-            event = reported(self.failure, self.event_key, observations[i], float(rewards[i]),
-                             bool(terminated[i]), bool(truncated[i]), info)
+            event = reported(
+                self.failure,
+                self.event_key,
+                observations[i],
+                float(rewards[i]),
+                bool(terminated[i]),
+                bool(truncated[i]),
+                info,
+            )
             self.watch.step(event, bool(terminated[i]), info)
             z = self._observe(observations, infos, i)
             if terminated[i] or truncated[i]:
@@ -143,8 +168,13 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
                 self._z[i] = None
             else:
                 self._z[i], self._event[i] = z, event
-        infos = {**infos, **_masked("shield", records), **_masked("shield_done", done),
-                 "applied_action": given, "proposed_action": proposed}
+        infos = {
+            **infos,
+            **_masked("shield", records),
+            **_masked("shield_done", done),
+            "applied_action": given,
+            "proposed_action": proposed,
+        }
         return observations, rewards, terminated, truncated, infos
 
     def close(self, **kwargs: Any) -> None:
@@ -160,8 +190,9 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
     def _end(self, i: int, z: list[float] | None, event: str | None) -> dict[str, Any]:
         assert z is not None
         self._open[i], self._event[i] = False, None
-        done = self.shield.revise(z, None, stream=self.streams[i], done=True, event=event,
-                                  learn=not self.evaluation)
+        done = self.shield.revise(
+            z, None, stream=self.streams[i], done=True, event=event, learn=not self.evaluation
+        )
         return done.to_dict()
 
     def _observe(self, observations: Any, infos: dict[str, Any], i: int) -> list[float]:
@@ -172,8 +203,11 @@ class ShieldVectorWrapper(gym.vector.VectorWrapper):
 
 def _one(infos: dict[str, Any], i: int) -> dict[str, Any]:
     """Copy ``i``'s info from a vectorised one (its keys where their ``_key`` mask holds)."""
-    return {key: _one(value, i) if isinstance(value, dict) else value[i]
-            for key, value in infos.items() if not key.startswith("_") and _present(infos, key, i)}
+    return {
+        key: _one(value, i) if isinstance(value, dict) else value[i]
+        for key, value in infos.items()
+        if not key.startswith("_") and _present(infos, key, i)
+    }
 
 
 def _present(infos: dict[str, Any], key: str, i: int) -> bool:

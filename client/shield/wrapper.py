@@ -65,8 +65,9 @@ class FailureWatch:
     An environment whose episodes end well (a goal reached) warns too; the message says how
     to silence it."""
 
-    def __init__(self, failure: Failure | None, event_key: str,
-                 config: ShieldConfig | None) -> None:
+    def __init__(
+        self, failure: Failure | None, event_key: str, config: ShieldConfig | None
+    ) -> None:
         self.failure = failure
         self.event_key = event_key
         self.names = [c.name for c in config.criteria] if config is not None else []
@@ -89,8 +90,10 @@ class FailureWatch:
         """What the warning says: what was seen and how to pass ``failure=``."""
         name = self.names[0] if self.names else "crash"
         if self.failure is None:
-            source = (f"It reads failures from info[{self.event_key!r}], which this environment "
-                      f"{'has always left empty' if self.key_seen else 'never sets'}. ")
+            source = (
+                f"It reads failures from info[{self.event_key!r}], which this environment "
+                f"{'has always left empty' if self.key_seen else 'never sets'}. "
+            )
         else:
             source = "Its failure= predicate returned None at every step. "
         criteria = f" (this shield's criteria: {', '.join(self.names)})" if self.names else ""
@@ -103,7 +106,8 @@ class FailureWatch:
             f"ShieldWrapper(env, failure=lambda observation, reward, terminated, truncated, "
             f"info: {name!r} if info.get('crashed') else None, ...). If these episodes ended "
             "well, ignore this: warnings.filterwarnings('ignore', "
-            "category=client.shield.NoFailureReported).")
+            "category=client.shield.NoFailureReported)."
+        )
 
 
 def check_failure(failure: Failure | None) -> None:
@@ -121,25 +125,39 @@ def check_failure(failure: Failure | None) -> None:
             f"failure= is called after every step as failure(observation, reward, terminated, "
             f"truncated, info) and returns the failed criterion's name or None; "
             f"{getattr(failure, '__name__', failure)}{signature} cannot take these five "
-            f"arguments ({error})") from error
+            f"arguments ({error})"
+        ) from error
 
 
-def reported(failure: Failure | None, event_key: str, observation: Any, reward: float,
-             terminated: bool, truncated: bool, info: dict[str, Any]) -> str | None:
+def reported(
+    failure: Failure | None,
+    event_key: str,
+    observation: Any,
+    reward: float,
+    terminated: bool,
+    truncated: bool,
+    info: dict[str, Any],
+) -> str | None:
     """The failure a step ended in: ``failure(...)``'s answer, else ``info[event_key]``."""
     if failure is None:
         event: Any = info.get(event_key)
         return None if event is None else str(event)
     event = failure(observation, reward, terminated, truncated, info)
     if event is not None and not isinstance(event, str):
-        raise TypeError(f"failure= returns the name of the criterion that failed (a str) or "
-                        f"None, not {event!r}")
+        raise TypeError(
+            f"failure= returns the name of the criterion that failed (a str) or None, not {event!r}"
+        )
     return event
 
 
-def bind(env: AnyEnv, shield: StepShield | None, config: ShieldConfig | None,
-         criteria: Mapping[str, str] | None, observation_key: str,
-         warmup_steps: int) -> tuple[ShieldConfig | None, StepShield]:
+def bind(
+    env: AnyEnv,
+    shield: StepShield | None,
+    config: ShieldConfig | None,
+    criteria: Mapping[str, str] | None,
+    observation_key: str,
+    warmup_steps: int,
+) -> tuple[ShieldConfig | None, StepShield]:
     """The configuration (derived from ``env`` and ``criteria`` unless given, and checked
     against ``env``) and the shield a wrapper uses: ``shield``, or a :class:`LocalShield` of
     its own."""
@@ -182,18 +200,27 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
     many steps of this wrapper. ``shadow``: never change it.
     """
 
-    def __init__(self, env: gym.Env[Any, Any], shield: StepShield | None = None, *,
-                 config: ShieldConfig | None = None,
-                 criteria: Mapping[str, str] | None = None,
-                 failure: Failure | None = None, event_key: str = "event",
-                 observation_key: str = "efsm_observation", stream: str | None = None,
-                 warmup_steps: int = 0, shadow: bool = False) -> None:
+    def __init__(
+        self,
+        env: gym.Env[Any, Any],
+        shield: StepShield | None = None,
+        *,
+        config: ShieldConfig | None = None,
+        criteria: Mapping[str, str] | None = None,
+        failure: Failure | None = None,
+        event_key: str = "event",
+        observation_key: str = "efsm_observation",
+        stream: str | None = None,
+        warmup_steps: int = 0,
+        shadow: bool = False,
+    ) -> None:
         super().__init__(env)
         one_dimensional(env.action_space)
         check_failure(failure)
         self._owned = shield is None
-        self.config, self.shield = bind(env, shield, config, criteria, observation_key,
-                                        warmup_steps)
+        self.config, self.shield = bind(
+            env, shield, config, criteria, observation_key, warmup_steps
+        )
         self.failure = failure
         self.event_key = event_key
         self.watch = FailureWatch(failure, event_key, self.config)
@@ -212,8 +239,9 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
         """Evaluation mode: the shield still revises but learns nothing (``learn: false``)."""
         self.evaluation = on
 
-    def reset(self, *, seed: int | None = None,
-              options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
         if self._open:  # an episode left mid-way: its stream ends here, no failure learned
             self._end(self._z, None)
         if seed is not None and self._owned and not self._seeded and self.steps == 0:
@@ -233,16 +261,23 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
         proposed = float(np.asarray(action, dtype=np.float64).reshape(-1)[0])
         z = self._z
         shadow = self.shadow or self.steps < self.warmup_steps
-        decision = self.shield.revise(z, proposed, stream=self.stream, event=self._event,
-                                      shadow=shadow, learn=not self.evaluation)
+        decision = self.shield.revise(
+            z,
+            proposed,
+            stream=self.stream,
+            event=self._event,
+            shadow=shadow,
+            learn=not self.evaluation,
+        )
         self._open, self._event = True, None
         self.steps += 1
         assert decision.action is not None
         space = self.env.action_space
         applied = np.asarray(decision.action, dtype=space.dtype).reshape(space.shape)
         observation, reward, terminated, truncated, info = self.env.step(applied)
-        event = reported(self.failure, self.event_key, observation, float(reward), terminated,
-                         truncated, info)
+        event = reported(
+            self.failure, self.event_key, observation, float(reward), terminated, truncated, info
+        )
         self.watch.step(event, terminated, info)
         self._z = self._observe(observation, info)
         info["shield"] = decision.to_dict()
@@ -267,11 +302,11 @@ class ShieldWrapper(gym.Wrapper[Any, Any, Any, Any]):
     def _end(self, z: list[float] | None, event: str | None) -> dict[str, Any]:
         assert z is not None
         self._open, self._event = False, None
-        done = self.shield.revise(z, None, stream=self.stream, done=True, event=event,
-                                  learn=not self.evaluation)
+        done = self.shield.revise(
+            z, None, stream=self.stream, done=True, event=event, learn=not self.evaluation
+        )
         return done.to_dict()
 
     def _observe(self, observation: Any, info: dict[str, Any]) -> list[float]:
         z = info.get(self.observation_key, observation)
         return [float(v) for v in np.asarray(z, dtype=np.float64).reshape(-1)]
-

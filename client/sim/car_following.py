@@ -98,8 +98,12 @@ class CarFollowingEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]])
 
     metadata: dict[str, Any] = {"render_modes": []}
 
-    def __init__(self, lead: lead_data.LeadProfiles | None = None,
-                 reward: RewardConfig | None = None, start: StartConfig | None = None) -> None:
+    def __init__(
+        self,
+        lead: lead_data.LeadProfiles | None = None,
+        reward: RewardConfig | None = None,
+        start: StartConfig | None = None,
+    ) -> None:
         self.lead = lead if lead is not None else lead_data.cmap("train")
         self.reward_config = reward or RewardConfig()
         self.start = start or StartConfig()
@@ -117,9 +121,9 @@ class CarFollowingEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]])
         paper's failures (:func:`client.shield.spaces.config_for` reads it)."""
         return ShieldConfig()
 
-    def reset(self, *, seed: int | None = None,
-              options: dict[str, Any] | None = None) -> tuple[npt.NDArray[np.float32],
-                                                              dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[npt.NDArray[np.float32], dict[str, Any]]:
         super().reset(seed=seed)
         rng = self.np_random
         self._profile = self.lead.window(rng)
@@ -131,8 +135,9 @@ class CarFollowingEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]])
         self._a_prev = 0.0
         return self._observation(), self._info(None)
 
-    def step(self, action: npt.NDArray[np.float32] | float) -> tuple[
-            npt.NDArray[np.float32], float, bool, bool, dict[str, Any]]:
+    def step(
+        self, action: npt.NDArray[np.float32] | float
+    ) -> tuple[npt.NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         a = min(max(float(np.asarray(action).reshape(-1)[0]), -A_MAX), A_MAX)
         # Eq. 8: positions with the current speeds, then the speeds
         self._headway += (self._v_lead - self._v_ego) * DT
@@ -155,9 +160,15 @@ class CarFollowingEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]])
     def state(self) -> dict[str, Any]:
         """Where the episode stands and where the generator is: :meth:`restore` continues
         the episode (and the episodes after it) exactly."""
-        return {"profile": self._profile.copy(), "t": self._t, "headway": self._headway,
-                "v_ego": self._v_ego, "v_lead": self._v_lead, "a_prev": self._a_prev,
-                "rng": self.np_random.bit_generator.state}
+        return {
+            "profile": self._profile.copy(),
+            "t": self._t,
+            "headway": self._headway,
+            "v_ego": self._v_ego,
+            "v_lead": self._v_lead,
+            "a_prev": self._a_prev,
+            "rng": self.np_random.bit_generator.state,
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         self._profile = np.array(state["profile"])
@@ -167,16 +178,18 @@ class CarFollowingEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]])
 
     def _reward(self, a: float) -> float:
         cfg = self.reward_config
-        target = (cfg.headway_const * cfg.d_safe if cfg.form == "as_written"
-                  else cfg.d_safe + cfg.headway_const * self._v_ego)
+        target = (
+            cfg.headway_const * cfg.d_safe
+            if cfg.form == "as_written"
+            else cfg.d_safe + cfg.headway_const * self._v_ego
+        )
         vel = math.exp(-((self._v_ego - self._v_lead) ** 2) / cfg.v_max) - 1.0  # Eq. 10
         dist = math.exp(-((self._headway - target) ** 2) / (2.0 * target)) - 1.0  # Eq. 11
         accel = math.exp(-((a - self._a_prev) ** 2) / (2.0 * cfg.accel_max)) - 1.0  # Eq. 12
         return vel + dist + accel
 
     def _observation(self) -> npt.NDArray[np.float32]:
-        return np.array([self._v_ego, self._headway, self._v_lead, self._a_prev],
-                        dtype=np.float32)
+        return np.array([self._v_ego, self._headway, self._v_lead, self._a_prev], dtype=np.float32)
 
     def _info(self, event: str | None) -> dict[str, Any]:
         return {
@@ -190,8 +203,11 @@ class CarFollowingEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]])
 def register() -> None:
     """Register ``CarFollowing-v0`` with Gymnasium (idempotent)."""
     if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="client.sim.car_following:CarFollowingEnv",
-                     max_episode_steps=MAX_STEPS)
+        gym.register(
+            id=ENV_ID,
+            entry_point="client.sim.car_following:CarFollowingEnv",
+            max_episode_steps=MAX_STEPS,
+        )
 
 
 register()

@@ -95,8 +95,9 @@ def epa() -> LeadProfiles:
     return LeadProfiles(tuple(traces), tuple(names))
 
 
-def synthetic(seed: int, count: int = 8, duration_s: float = 600.0,
-              hard_braking: bool = False) -> LeadProfiles:
+def synthetic(
+    seed: int, count: int = 8, duration_s: float = 600.0, hard_braking: bool = False
+) -> LeadProfiles:
     """Seeded traces of stop / accelerate / cruise / brake regimes with bounded jerk.
 
     ``hard_braking`` makes every braking regime brake at the full 2 m/s^2.
@@ -113,10 +114,12 @@ def synthetic(seed: int, count: int = 8, duration_s: float = 600.0,
             if remaining == 0:
                 regime = rng.choice(["stop", "accelerate", "cruise", "brake"])
                 remaining = int(rng.uniform(5.0, 30.0) / DT)
-                target = {"stop": -v / max(remaining * DT, 1.0),
-                          "accelerate": rng.uniform(0.3, A_MAX),
-                          "cruise": 0.0,
-                          "brake": -A_MAX if hard_braking else -rng.uniform(0.3, A_MAX)}[regime]
+                target = {
+                    "stop": -v / max(remaining * DT, 1.0),
+                    "accelerate": rng.uniform(0.3, A_MAX),
+                    "cruise": 0.0,
+                    "brake": -A_MAX if hard_braking else -rng.uniform(0.3, A_MAX),
+                }[regime]
             a += float(np.clip(target - a, -jerk, jerk))
             v = float(np.clip(v + a * DT, 0.0, V_MAX))
             speed[i] = v

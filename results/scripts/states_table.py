@@ -29,8 +29,12 @@ def view(model: dict[str, Any]) -> dict[str, Any]:
     if "entries" not in model["flags"]:
         for s in states:
             del s["entries"]
-    return {"n_states": shield.n_states, "episodes": shield.counters.episodes,
-            "config": shield.config.to_dict(), "states": states}
+    return {
+        "n_states": shield.n_states,
+        "episodes": shield.counters.episodes,
+        "config": shield.config.to_dict(),
+        "states": states,
+    }
 
 
 def collisions(states: list[dict[str, Any]], unflagged: bool = False) -> int:
@@ -45,25 +49,32 @@ def table(snapshot: dict[str, Any]) -> str:
         f"{snapshot['n_states']} states after {snapshot['episodes']} episodes",
         "",
         "| state | v_ego (m/s) | headway (m) | v_lead (m/s) | spread | visits | "
-        + ("entries | " if entries else "") + "collisions | large distances | flag |",
+        + ("entries | " if entries else "")
+        + "collisions | large distances | flag |",
         "|---:|---:|---:|---:|---:|---:|" + ("---:|" if entries else "") + "---:|---:|---|",
     ]
     for s in snapshot["states"]:
         v_ego, headway, v_lead = s["centre"]
         f = s["failures"]
-        lines.append(f"| {s['index']} | {v_ego:.1f} | {headway:.1f} | {v_lead:.1f} "
-                     f"| {s['spread']:.3f} | {s['visits']} | "
-                     + (f"{s['entries']} | " if entries else "")
-                     + f"{f['collision']} | {f['large_distance']} | {s['flag'] or '-'} |")
+        lines.append(
+            f"| {s['index']} | {v_ego:.1f} | {headway:.1f} | {v_lead:.1f} "
+            f"| {s['spread']:.3f} | {s['visits']} | "
+            + (f"{s['entries']} | " if entries else "")
+            + f"{f['collision']} | {f['large_distance']} | {s['flag'] or '-'} |"
+        )
     states = snapshot["states"]
     reviser = snapshot["config"]["reviser"]
     rate = reviser.get("flag_min_rate")
     per = reviser.get("flag_rate_per", "recognition")
-    lines += ["", f"{collisions(states, unflagged=True)} of {collisions(states)} collisions "
-                  f"were recognised in states not "
-                  f"flagged now (flags: {reviser['flags']}"
-                  + (f", min rate {rate}" if rate is not None else "")
-                  + (f" per {per}" if per != "recognition" else "") + ")"]
+    lines += [
+        "",
+        f"{collisions(states, unflagged=True)} of {collisions(states)} collisions "
+        f"were recognised in states not "
+        f"flagged now (flags: {reviser['flags']}"
+        + (f", min rate {rate}" if rate is not None else "")
+        + (f" per {per}" if per != "recognition" else "")
+        + ")",
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -73,17 +84,22 @@ def main(target: str) -> None:
         sys.stdout.write(table(snapshot))
         return
     out = Path(target)
-    summary = ["| model | episodes | states | flagged collision / large distance | collisions "
-               "| of them in states not flagged now |", "|---|---:|---:|---|---:|---:|"]
+    summary = [
+        "| model | episodes | states | flagged collision / large distance | collisions "
+        "| of them in states not flagged now |",
+        "|---|---:|---:|---|---:|---:|",
+    ]
     parts = []
     for path in sorted((out / "models").glob("*.json.gz")):
         name = path.name.removesuffix(".json.gz")
         snapshot = view(json.loads(gzip.decompress(path.read_bytes()))["exact"])
         states = snapshot["states"]
         flagged = [sum(s["flag"] == c for s in states) for c in ("collision", "large_distance")]
-        summary.append(f"| {name} | {snapshot['episodes']} | {len(states)} "
-                       f"| {flagged[0]} / {flagged[1]} | {collisions(states)} "
-                       f"| {collisions(states, unflagged=True)} |")
+        summary.append(
+            f"| {name} | {snapshot['episodes']} | {len(states)} "
+            f"| {flagged[0]} / {flagged[1]} | {collisions(states)} "
+            f"| {collisions(states, unflagged=True)} |"
+        )
         parts.append(f"### {name}\n\n{table(snapshot)}")
     sys.stdout.write("\n".join(["\n".join(summary) + "\n", *parts]))
 

@@ -46,8 +46,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path, nargs="?")
     parser.add_argument("--after", type=int, default=150)
-    parser.add_argument("--every-start", action="store_true",
-                        help="replay every episode after --after, failed or not")
+    parser.add_argument(
+        "--every-start",
+        action="store_true",
+        help="replay every episode after --after, failed or not",
+    )
     parser.add_argument("--braking", type=float, default=A_MAX, help="m/s^2 (default: 2)")
     parser.add_argument("--seed", type=int, help="without OUT: the runs' base seed")
     parser.add_argument("--runs", type=int, default=10)
@@ -57,8 +60,10 @@ def main() -> None:
         if args.seed is None:
             parser.error("give OUT, or --every-start with --seed")
         lead = ExperimentConfig().lead
-        runs = [(f"run {i}", seed, args.episodes, lead)
-                for i, seed in enumerate(run_seeds(args.seed, args.runs))]
+        runs = [
+            (f"run {i}", seed, args.episodes, lead)
+            for i, seed in enumerate(run_seeds(args.seed, args.runs))
+        ]
         every_start(runs, args.after, args.braking)
         return
     if args.every_start:
@@ -68,8 +73,11 @@ def main() -> None:
     for path in sorted((args.out / "records").glob("*.jsonl")):
         lines = [json.loads(line) for line in path.open()]
         header = lines[0]["header"]
-        late = {r["episode"]: r for r in lines[1:]
-                if r["outcome"] == "collision" and r["episode"] > args.after}
+        late = {
+            r["episode"]: r
+            for r in lines[1:]
+            if r["outcome"] == "collision" and r["episode"] > args.after
+        }
         if not late:
             continue
         env = CarFollowingEnv(lead=profiles(header["config"]["lead"]))
@@ -83,11 +91,14 @@ def main() -> None:
                 env.restore(start)
                 total += 1
                 unavoidable += anyway
-                sys.stdout.write(f"{path.stem} episode {episode}: collision at step "
-                                 f"{late[episode]['steps']}, under full braking "
-                                 f"{'a collision anyway' if anyway else 'none'}\n")
-    sys.stdout.write(f"{unavoidable} of {total} collisions after episode {args.after} "
-                     "could not be avoided\n")
+                sys.stdout.write(
+                    f"{path.stem} episode {episode}: collision at step "
+                    f"{late[episode]['steps']}, under full braking "
+                    f"{'a collision anyway' if anyway else 'none'}\n"
+                )
+    sys.stdout.write(
+        f"{unavoidable} of {total} collisions after episode {args.after} could not be avoided\n"
+    )
 
 
 def recorded_runs(out: Path) -> list[tuple[str, int, int, str]]:
@@ -96,8 +107,9 @@ def recorded_runs(out: Path) -> list[tuple[str, int, int, str]]:
     for path in sorted((out / "records").glob("*.jsonl")):
         with path.open() as file:
             header = json.loads(file.readline())["header"]
-        runs.append((path.stem, header["seed"], header["config"]["episodes"],
-                     header["config"]["lead"]))
+        runs.append(
+            (path.stem, header["seed"], header["config"]["episodes"], header["config"]["lead"])
+        )
     return runs
 
 
@@ -117,12 +129,16 @@ def every_start(runs: list[tuple[str, int, int, str]], after: int, braking: floa
                     doomed.append(episode)
                 env.restore(start)
         doomed_runs += bool(doomed)
-        sys.stdout.write(f"{name}: {len(doomed)} of {episodes - after} starts after "
-                         f"episode {after} collide under braking at {braking:g} m/s^2 "
-                         f"{doomed}\n")
-    sys.stdout.write(f"{doomed_runs} of {len(runs)} runs drew such a start: at most "
-                     f"{len(runs) - doomed_runs} can be free of failures after episode "
-                     f"{after}\n")
+        sys.stdout.write(
+            f"{name}: {len(doomed)} of {episodes - after} starts after "
+            f"episode {after} collide under braking at {braking:g} m/s^2 "
+            f"{doomed}\n"
+        )
+    sys.stdout.write(
+        f"{doomed_runs} of {len(runs)} runs drew such a start: at most "
+        f"{len(runs) - doomed_runs} can be free of failures after episode "
+        f"{after}\n"
+    )
 
 
 if __name__ == "__main__":

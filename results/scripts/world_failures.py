@@ -45,14 +45,15 @@ def main() -> None:
             d = shield.step(z, float(act(observation)), stream="0")
             risk = ", ".join(f"{k} {v:.3f}" for k, v in d.risk.items())
             limit = "-" if d.threshold is None else f"{d.threshold:.4f}"
-            last.append(f"  step {t}: z {[round(v, 1) for v in z]}, applied {d.action:.2f} "
-                        f"({d.reason}), proposal's risk {risk}, limit {limit}, state {d.state}")
+            last.append(
+                f"  step {t}: z {[round(v, 1) for v in z]}, applied {d.action:.2f} "
+                f"({d.reason}), proposal's risk {risk}, limit {limit}, state {d.state}"
+            )
             observation, _, terminated, truncated, info = env.step(np.array([float(d.action)]))
             event = world.event(observation, info)
             if event is not None or terminated or truncated:
                 break
-        shield.step(world.shield_observation(observation), None, stream="0", done=True,
-                    event=event)
+        shield.step(world.shield_observation(observation), None, stream="0", done=True, event=event)
         if event is not None and episode >= args.warmup:
             out.write(f"episode {episode}: {event} at step {t}, {shield.n_states} states\n")
             out.write("\n".join(last) + "\n")

@@ -19,14 +19,20 @@ from app.settings import Settings
 STEP = {"observation": [14.2, 38.5, 15.0], "action": 0.8}
 
 
-def episode(c: TestClient, path: str = "/revise", stream: str = "0", n: int = 6,
-            crash: bool = True) -> list[dict[str, Any]]:
+def episode(
+    c: TestClient, path: str = "/revise", stream: str = "0", n: int = 6, crash: bool = True
+) -> list[dict[str, Any]]:
     out = []
     for t in range(n):
         body = {"observation": [10.0 + t, 12.0 - 2 * t, 9.0], "action": 0.5, "stream": stream}
         out.append(c.post(path, json=body).json())
-    end = {"observation": [16.0, 0.0, 9.0], "action": None, "stream": stream, "done": True,
-           "event": "collision" if crash else None}
+    end = {
+        "observation": [16.0, 0.0, 9.0],
+        "action": None,
+        "stream": stream,
+        "done": True,
+        "event": "collision" if crash else None,
+    }
     out.append(c.post(path, json=end).json())
     return out
 
@@ -39,9 +45,25 @@ def test_revise_returns_the_decision_record(client: TestClient) -> None:
     r = client.post("/revise", json=STEP)
     assert r.status_code == 200
     d = r.json()
-    assert set(d) == {"action", "proposed", "revised", "reason", "verdict", "risk", "threshold",
-                      "candidates", "state", "n_states", "new_state", "episode", "step",
-                      "model_version", "stream", "shadow", "suggested"}
+    assert set(d) == {
+        "action",
+        "proposed",
+        "revised",
+        "reason",
+        "verdict",
+        "risk",
+        "threshold",
+        "candidates",
+        "state",
+        "n_states",
+        "new_state",
+        "episode",
+        "step",
+        "model_version",
+        "stream",
+        "shadow",
+        "suggested",
+    }
     assert (d["action"], d["reason"]) == (0.8, "cold_start")
     assert (d["n_states"], d["model_version"]) == (1, 1)
 
@@ -92,36 +114,49 @@ def test_snapshot_views(client: TestClient) -> None:
     assert "exact" not in client.get("/model", params={"exact": False}).json()
 
 
-@pytest.mark.parametrize(("params", "field"), [({"tpm": "bogus"}, "tpm"),
-                                               ({"action": "twelve"}, "action")])
-def test_a_bad_query_parameter_is_named_as_such(client: TestClient, params: dict[str, str],
-                                                field: str) -> None:
+@pytest.mark.parametrize(
+    ("params", "field"), [({"tpm": "bogus"}, "tpm"), ({"action": "twelve"}, "action")]
+)
+def test_a_bad_query_parameter_is_named_as_such(
+    client: TestClient, params: dict[str, str], field: str
+) -> None:
     r = client.get("/model", params=params)
     assert r.status_code == 422
-    assert r.json()["error"] | {"message": ""} == {"code": "invalid_query", "message": "",
-                                                    "field": field}
+    assert r.json()["error"] | {"message": ""} == {
+        "code": "invalid_query",
+        "message": "",
+        "field": field,
+    }
 
 
 def test_snapshot_put_restores_a_model_that_decides_alike(client: TestClient) -> None:
-    client.post("/models", json={"name": "a", "config": {"reviser": {
-        "activate_after_episodes": 1}}})
+    client.post(
+        "/models", json={"name": "a", "config": {"reviser": {"activate_after_episodes": 1}}}
+    )
     for _ in range(3):
         episode(client, "/models/a/revise")
     snap = client.get("/models/a").json()
     assert client.put("/models/b", json=snap).status_code == 200
     npz = client.get("/models/a", headers={"accept": "application/x-npz"}).content
-    assert client.put("/models/c", content=npz,
-                      headers={"content-type": "application/x-npz"}).status_code == 200
+    assert (
+        client.put(
+            "/models/c", content=npz, headers={"content-type": "application/x-npz"}
+        ).status_code
+        == 200
+    )
     runs = [episode(client, f"/models/{m}/revise") for m in ("a", "b", "c")]
     assert runs[0] == runs[1] == runs[2]
     assert any(d["reason"] == "revised_safety" for d in runs[0])
 
 
 def test_the_risk_reviser_through_the_api(client: TestClient) -> None:
-    config = {"reviser": {"method": "risk", "activate_after_episodes": 1},
-              "risk": {"horizon": 4},
-              "observation": {"features": [{"name": "closing", "weights": [1, 0, -1],
-                                            "low": -10, "high": 10}]}}
+    config = {
+        "reviser": {"method": "risk", "activate_after_episodes": 1},
+        "risk": {"horizon": 4},
+        "observation": {
+            "features": [{"name": "closing", "weights": [1, 0, -1], "low": -10, "high": 10}]
+        },
+    }
     assert client.post("/models", json={"name": "r", "config": config}).status_code == 201
     for _ in range(3):
         episode(client, "/models/r/revise")
@@ -133,8 +168,7 @@ def test_the_risk_reviser_through_the_api(client: TestClient) -> None:
     revised = [d for d in runs[0] if d["revised"]]
     assert revised and revised[0]["reason"] == "revised_safety"
     assert revised[0]["risk"]["collision"] > 0.0
-    assert all(set(c["risk"]) == {"collision", "large_distance"}
-               for c in revised[0]["candidates"])
+    assert all(set(c["risk"]) == {"collision", "large_distance"} for c in revised[0]["candidates"])
 
 
 def test_npz_download_matches_the_core_snapshot(client: TestClient) -> None:
@@ -156,40 +190,98 @@ def test_batch_and_batch_across_models(client: TestClient) -> None:
 
 
 BAD = [
-    ("/revise", {"observation": [1.0, 2.0], "action": 0.0}, 422, "invalid_observation",
-     "observation"),
-    ("/revise", '{"observation": [1.0, NaN, 2.0], "action": 0.0}', 422, "invalid_body",
-     "observation.1"),
-    ("/revise", '{"observation": [1.0, Infinity, 2.0], "action": 0.0}', 422, "invalid_body",
-     "observation.1"),
+    (
+        "/revise",
+        {"observation": [1.0, 2.0], "action": 0.0},
+        422,
+        "invalid_observation",
+        "observation",
+    ),
+    (
+        "/revise",
+        '{"observation": [1.0, NaN, 2.0], "action": 0.0}',
+        422,
+        "invalid_body",
+        "observation.1",
+    ),
+    (
+        "/revise",
+        '{"observation": [1.0, Infinity, 2.0], "action": 0.0}',
+        422,
+        "invalid_body",
+        "observation.1",
+    ),
     ("/revise", {"observation": "fast", "action": 0.0}, 422, "invalid_body", "observation"),
-    ("/revise", {"observation": [1.0, 1e160, 2.0], "action": 0.0}, 422, "invalid_observation",
-     "observation"),
-    ("/revise", {"observation": [1.0, 1e160, 2.0], "action": 0.0, "learn": False}, 422,
-     "invalid_observation", "observation"),
-    ("/models/default/revise/batch", {"steps": [STEP, STEP, {**STEP, "observation":
-                                                              [1.0, 2.0, 1e308]}]},
-     422, "invalid_observation", "steps.2.observation"),
+    (
+        "/revise",
+        {"observation": [1.0, 1e160, 2.0], "action": 0.0},
+        422,
+        "invalid_observation",
+        "observation",
+    ),
+    (
+        "/revise",
+        {"observation": [1.0, 1e160, 2.0], "action": 0.0, "learn": False},
+        422,
+        "invalid_observation",
+        "observation",
+    ),
+    (
+        "/models/default/revise/batch",
+        {"steps": [STEP, STEP, {**STEP, "observation": [1.0, 2.0, 1e308]}]},
+        422,
+        "invalid_observation",
+        "steps.2.observation",
+    ),
     ("/revise", {"observation": [1.0, 2.0, 3.0], "action": "0.5"}, 422, "invalid_body", "action"),
-    ("/revise", {"observation": [1.0, 2.0, 3.0], "action": 0.0, "done": "yes"}, 422,
-     "invalid_body", "done"),
-    ("/revise", {"observation": [1.0, 2.0, 3.0], "action": 0.0, "event": "meteor"}, 422,
-     "unknown_criterion", "event"),
+    (
+        "/revise",
+        {"observation": [1.0, 2.0, 3.0], "action": 0.0, "done": "yes"},
+        422,
+        "invalid_body",
+        "done",
+    ),
+    (
+        "/revise",
+        {"observation": [1.0, 2.0, 3.0], "action": 0.0, "event": "meteor"},
+        422,
+        "unknown_criterion",
+        "event",
+    ),
     ("/revise", {"observation": [1.0, 2.0, 3.0]}, 422, "invalid_action", "action"),
-    ("/revise", {"observation": [1.0, 2.0, 3.0], "action": 0.0, "colour": "red"}, 422,
-     "invalid_body", "colour"),
+    (
+        "/revise",
+        {"observation": [1.0, 2.0, 3.0], "action": 0.0, "colour": "red"},
+        422,
+        "invalid_body",
+        "colour",
+    ),
     ("/revise", "{not json", 422, "invalid_json", None),
     ("/models/ghost/revise", STEP, 404, "unknown_model", "name"),
     ("/models/BAD!/revise", STEP, 422, "invalid_name", "name"),
     ("/models", {"name": "Bad!"}, 422, "invalid_name", "name"),
-    ("/revise/batch", {"steps": [{**STEP, "model": "a/b"}]}, 422, "invalid_name",
-     "steps.0.model"),
-    ("/models/default/revise/batch", {"steps": [STEP, {**STEP, "observation": [1.0]}, STEP]},
-     422, "invalid_observation", "steps.1.observation"),
-    ("/models/default/revise/batch", {"steps": [{**STEP, "observation": [1.0]}]},
-     422, "invalid_observation", "steps.0.observation"),
-    ("/revise/batch", {"steps": [{**STEP, "model": "default"}, {**STEP, "model": "ghost"}]},
-     404, "unknown_model", "name"),
+    ("/revise/batch", {"steps": [{**STEP, "model": "a/b"}]}, 422, "invalid_name", "steps.0.model"),
+    (
+        "/models/default/revise/batch",
+        {"steps": [STEP, {**STEP, "observation": [1.0]}, STEP]},
+        422,
+        "invalid_observation",
+        "steps.1.observation",
+    ),
+    (
+        "/models/default/revise/batch",
+        {"steps": [{**STEP, "observation": [1.0]}]},
+        422,
+        "invalid_observation",
+        "steps.0.observation",
+    ),
+    (
+        "/revise/batch",
+        {"steps": [{**STEP, "model": "default"}, {**STEP, "model": "ghost"}]},
+        404,
+        "unknown_model",
+        "name",
+    ),
 ]
 
 
@@ -215,8 +307,11 @@ def test_bad_configuration_names_the_field(client: TestClient) -> None:
     assert r.status_code == 422 and r.json()["error"]["field"] == "config.clustering.rho"
     r = client.post("/models", json={"name": "x", "config": {"reviser": {"nois": "std"}}})
     assert r.json()["error"]["field"] == "config.reviser.nois"
-    bound = {"name": "collision", "direction": "decrease",
-             "bound": {"observation": "gap", "below": 0}}
+    bound = {
+        "name": "collision",
+        "direction": "decrease",
+        "bound": {"observation": "gap", "below": 0},
+    }
     r = client.post("/models", json={"name": "x", "config": {"criteria": [bound]}})
     assert r.status_code == 422
     assert r.json()["error"]["field"] == "config.criteria.0.bound.observation"
@@ -225,7 +320,10 @@ def test_bad_configuration_names_the_field(client: TestClient) -> None:
     r = client.post("/models", json={"name": "x", "config": {"criteria": [bound]}})
     assert r.status_code in (200, 201)
     assert client.get("/models/x").json()["config"]["criteria"][0]["bound"] == {
-        "observation": "headway", "below": 0.0, "above": None}
+        "observation": "headway",
+        "below": 0.0,
+        "above": None,
+    }
 
 
 @pytest.fixture
@@ -237,14 +335,23 @@ def strict_client() -> Iterator[TestClient]:
 
 def test_token_is_required_everywhere_but_health(strict_client: TestClient) -> None:
     c = strict_client
-    assert c.get("/healthz").json() == {"status": "ok", "version": app.__version__,
-                                        "core": compiled.fingerprint()[:12]}
+    assert c.get("/healthz").json() == {
+        "status": "ok",
+        "version": app.__version__,
+        "core": compiled.fingerprint()[:12],
+    }
     assert c.get("/readyz").status_code == 200
-    for method, path in [("post", "/revise"), ("post", "/models/default/revise"),
-                         ("get", "/models"), ("get", "/model"), ("get", "/metrics"),
-                         ("get", "/models/default/history"),
-                         ("post", "/models/default/reset"), ("batch", "/revise/batch"),
-                         ("batch", "/models/default/revise/batch")]:
+    for method, path in [
+        ("post", "/revise"),
+        ("post", "/models/default/revise"),
+        ("get", "/models"),
+        ("get", "/model"),
+        ("get", "/metrics"),
+        ("get", "/models/default/history"),
+        ("post", "/models/default/reset"),
+        ("batch", "/revise/batch"),
+        ("batch", "/models/default/revise/batch"),
+    ]:
         if method == "batch":
             r = c.post(path, json={"steps": [{**STEP, "model": "default"}]})
         else:
@@ -263,8 +370,7 @@ def test_body_and_batch_limits(strict_client: TestClient) -> None:
     big = {"steps": [STEP] * 200}
     r = strict_client.post("/models/default/revise/batch", json=big, headers=good)
     assert r.status_code == 413 and r.json()["error"]["code"] == "too_large"
-    r = strict_client.post("/models/default/revise/batch", json={"steps": [STEP] * 4},
-                           headers=good)
+    r = strict_client.post("/models/default/revise/batch", json={"steps": [STEP] * 4}, headers=good)
     assert r.status_code == 413 and r.json()["error"]["field"] == "steps"
     assert strict_client.get("/model", headers=good).json()["steps"] == 0
 
@@ -279,8 +385,11 @@ def test_websocket_steps_and_errors_keep_the_connection(client: TestClient) -> N
         nan = ws.receive_json()["error"]
         assert (nan["code"], nan["field"]) == ("invalid_body", "observation.1")
         ws.send_text(json.dumps({"observation": [1.0], "action": 0.0}))
-        assert ws.receive_json()["error"] == {"code": "invalid_observation", "field":
-                                              "observation", "message": ws_msg(1)}
+        assert ws.receive_json()["error"] == {
+            "code": "invalid_observation",
+            "field": "observation",
+            "message": ws_msg(1),
+        }
         ws.send_bytes(b"\x00")
         assert ws.receive_json()["error"]["code"] == "unsupported_frame"
         ws.send_text(json.dumps(STEP))
@@ -289,11 +398,16 @@ def test_websocket_steps_and_errors_keep_the_connection(client: TestClient) -> N
 
 
 def test_without_the_token_a_bad_request_is_unauthorized_before_it_is_invalid(
-        strict_client: TestClient) -> None:
+    strict_client: TestClient,
+) -> None:
     from starlette.websockets import WebSocketDisconnect
 
-    bad = [("/revise", {"observation": "x", "action": 0}), ("/models/BAD!/revise", STEP),
-           ("/models/default/revise/batch", {"steps": "x"}), ("/models", {"name": "Bad!"})]
+    bad = [
+        ("/revise", {"observation": "x", "action": 0}),
+        ("/models/BAD!/revise", STEP),
+        ("/models/default/revise/batch", {"steps": "x"}),
+        ("/models", {"name": "Bad!"}),
+    ]
     for path, body in bad:
         for headers in ({}, {"Authorization": "Bearer wrong"}):
             r = strict_client.post(path, json=body, headers=headers)
@@ -309,7 +423,8 @@ def test_without_the_token_a_bad_request_is_unauthorized_before_it_is_invalid(
 
 
 def test_a_websocket_to_a_bad_model_name_gets_the_error_frame_of_an_unknown_one(
-        client: TestClient) -> None:
+    client: TestClient,
+) -> None:
     from starlette.websockets import WebSocketDisconnect
 
     for path, code in (("/models/ghost/ws", "unknown_model"), ("/models/BAD!/ws", "invalid_name")):
@@ -337,12 +452,16 @@ def test_websocket_needs_the_token(strict_client: TestClient) -> None:
 
 
 def test_a_websocket_frame_over_the_body_limit_is_refused_and_the_stream_goes_on(
-        strict_client: TestClient) -> None:
+    strict_client: TestClient,
+) -> None:
     with strict_client.websocket_connect("/ws?token=s3cret") as ws:
         padded = json.dumps(STEP)[:-1] + ', "stream": "' + "é" * 2100 + '"}'  # 4 KiB in UTF-8
         ws.send_text(padded)
         assert ws.receive_json()["error"] == {
-            "code": "too_large", "field": None, "message": "frame over 4096 bytes"}
+            "code": "too_large",
+            "field": None,
+            "message": "frame over 4096 bytes",
+        }
         ws.send_text(json.dumps(STEP))
         assert ws.receive_json()["model_version"] == 1
 
@@ -360,21 +479,26 @@ def test_metrics_count_requests_decisions_and_states(client: TestClient) -> None
 
 def decisions_counted(c: TestClient, model: str = "default") -> float:
     """The model's decisions on /metrics, summed over reasons (and shards, if any)."""
-    return sum(float(line.rsplit(" ", 1)[1]) for line in c.get("/metrics").text.splitlines()
-               if line.startswith("efsm_decisions_total{") and f'model="{model}"' in line)
+    return sum(
+        float(line.rsplit(" ", 1)[1])
+        for line in c.get("/metrics").text.splitlines()
+        if line.startswith("efsm_decisions_total{") and f'model="{model}"' in line
+    )
 
 
 def test_metrics_count_every_decision_once_and_refused_steps_not(client: TestClient) -> None:
     client.post("/revise", json=STEP)
-    assert client.post("/models/default/revise/batch", json={"steps": [STEP, STEP]}
-                       ).status_code == 200
+    assert (
+        client.post("/models/default/revise/batch", json={"steps": [STEP, STEP]}).status_code == 200
+    )
     with client.websocket_connect("/ws") as ws:
         ws.send_text(json.dumps(STEP))
         ws.receive_json()
     assert decisions_counted(client) == 4
     bad = {"observation": [1.0, 2.0], "action": 0.5}
-    assert client.post("/models/default/revise/batch", json={"steps": [STEP, bad]}
-                       ).status_code == 422
+    assert (
+        client.post("/models/default/revise/batch", json={"steps": [STEP, bad]}).status_code == 422
+    )
     assert client.post("/revise", json=bad).status_code == 422
     assert decisions_counted(client) == 4
 
@@ -429,16 +553,22 @@ def test_the_history_holds_the_totals_at_each_episode_end(client: TestClient) ->
     assert history["interventions"].keys() == {"collision", "large_distance"}
     assert history["n_states"][-1] == history["totals"]["n_states"] >= 1
     assert history["totals"] == {
-        "episodes": 3, "steps": 21, "n_states": history["n_states"][-1], "model_version": 21,
+        "episodes": 3,
+        "steps": 21,
+        "n_states": history["n_states"][-1],
+        "model_version": 21,
         "interventions": {c: v[-1] for c, v in history["interventions"].items()},
-        "failures": {"collision": 2, "large_distance": 0}}
+        "failures": {"collision": 2, "large_distance": 0},
+    }
     # the history is part of the model: a restored copy has it and goes on from it
     assert client.put("/models/copy", json=client.get("/model").json()).status_code == 200
     assert client.get("/models/copy/history").json() == {**history, "name": "copy"}
     episode(client, "/models/copy/revise")
     assert client.get("/models/copy/history").json()["episodes"] == [1, 2, 3, 4]
-    for path, status, code in (("/models/ghost/history", 404, "unknown_model"),
-                               ("/models/BAD!/history", 422, "invalid_name")):
+    for path, status, code in (
+        ("/models/ghost/history", 404, "unknown_model"),
+        ("/models/BAD!/history", 422, "invalid_name"),
+    ):
         r = client.get(path)
         assert r.status_code == status and r.json()["error"]["code"] == code, path
         assert r.json()["error"]["field"] == "name"

@@ -23,8 +23,9 @@ from tests.utils import random_stream
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 playwright = pytest.importorskip("playwright.sync_api")
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="needs Debian's chromium (.ci/run "
-                                                          "installs it)")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None, reason="needs Debian's chromium (.ci/run installs it)"
+)
 TOKEN = "dash-token"
 DOCS = Path(__file__).parents[2] / "docs"
 CHARTS = ("chart-revisions", "chart-share", "chart-states", "chart-failures")
@@ -45,8 +46,9 @@ COLOURED = """(id) => {
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    s = start_server(tmp_path_factory.mktemp("dash") / "data", "--fsync", "never",
-                     env={"EFSM_TOKEN": TOKEN})
+    s = start_server(
+        tmp_path_factory.mktemp("dash") / "data", "--fsync", "never", env={"EFSM_TOKEN": TOKEN}
+    )
     yield s
     s.stop()
 
@@ -54,9 +56,13 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
 def feed(url: str, seed: int, steps: int) -> None:
     with ShieldClient(url, token=TOKEN) as shield:
         for z, a, done in random_stream(seed, steps):
-            shield.revise(z, None if done else a, done=done,
-                          event="collision" if done and seed % 2 == 0 else None,
-                          stream=f"car-{seed}")
+            shield.revise(
+                z,
+                None if done else a,
+                done=done,
+                event="collision" if done and seed % 2 == 0 else None,
+                stream=f"car-{seed}",
+            )
 
 
 @contextlib.contextmanager
@@ -78,15 +84,16 @@ def live_dashboard(url: str, query: str = "") -> Iterator[tuple[Any, list[str]]]
 def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) -> None:
     feed(server.url, 0, 150)
     with live_dashboard(server.url) as (page, errors):
-
         with ShieldClient(server.url, token=TOKEN) as shield:
             n = shield.snapshot(tpm="none", exact=False)["n_states"]
-            page.wait_for_function(f"document.getElementById('state-count').textContent == '{n}'",
-                                   timeout=5000)
+            page.wait_for_function(
+                f"document.getElementById('state-count').textContent == '{n}'", timeout=5000
+            )
             feed(server.url, 2, 100)  # the page follows while steps stream in
             n = shield.snapshot(tpm="none", exact=False)["n_states"]
-            page.wait_for_function(f"document.getElementById('state-count').textContent == '{n}'",
-                                   timeout=5000)
+            page.wait_for_function(
+                f"document.getElementById('state-count').textContent == '{n}'", timeout=5000
+            )
             # a new state shows within a second of being created (a headway far beyond
             # the stream's 0-200 m makes one)
             decision = shield.revise([31.0, 400.0, 1.0], 0.0, stream="probe")
@@ -94,7 +101,8 @@ def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) ->
             created = time.monotonic()
             page.wait_for_function(
                 f"document.getElementById('state-count').textContent == '{decision.n_states}'",
-                timeout=1000)
+                timeout=1000,
+            )
             assert time.monotonic() - created < 1.0
 
         # a click on a state shows its transitions under every action (once the plot holds
@@ -104,12 +112,16 @@ def test_the_dashboard_follows_the_model_live(server: Server, tmp_path: Path) ->
         box = page.locator("#states").bounding_box()
         assert box is not None
         width, height = page.evaluate(
-            "[document.getElementById('states').width, document.getElementById('states').height]")
+            "[document.getElementById('states').width, document.getElementById('states').height]"
+        )
         # every state is drawn inside the plot, the probe beyond the headway bound included
-        assert page.evaluate(f"view.positions.every(([i, x, y]) => x >= 0 && x <= {width} "
-                             f"&& y >= 0 && y <= {height})")
-        page.locator("#states").click(position={"x": x * box["width"] / width,
-                                                "y": y * box["height"] / height})
+        assert page.evaluate(
+            f"view.positions.every(([i, x, y]) => x >= 0 && x <= {width} "
+            f"&& y >= 0 && y <= {height})"
+        )
+        page.locator("#states").click(
+            position={"x": x * box["width"] / width, "y": y * box["height"] / height}
+        )
         page.wait_for_selector("#next-states")
         assert page.locator("#next-states tbody tr").count() == 20
         picked = page.locator("#picked").inner_text()
@@ -132,10 +144,18 @@ def feed_episodes(url: str, model: str, episodes: int, seed: int) -> None:
     steps = random_stream(seed, 25 * episodes)
     with ShieldClient(url, token=TOKEN, model=model) as shield:
         for e in range(episodes):
-            shield.revise_batch([
-                {"observation": z, "action": None if done else a, "done": done, "stream": "car",
-                 "event": "collision" if done and e % 3 == 0 else None}
-                for z, a, done in steps[25 * e:25 * (e + 1)]])
+            shield.revise_batch(
+                [
+                    {
+                        "observation": z,
+                        "action": None if done else a,
+                        "done": done,
+                        "stream": "car",
+                        "event": "collision" if done and e % 3 == 0 else None,
+                    }
+                    for z, a, done in steps[25 * e : 25 * (e + 1)]
+                ]
+            )
 
 
 def history_of(url: str, model: str) -> dict[str, Any]:
@@ -145,8 +165,7 @@ def history_of(url: str, model: str) -> dict[str, Any]:
     return result
 
 
-def test_the_history_is_drawn_on_open_with_labelled_axes(server: Server, tmp_path: Path
-                                                         ) -> None:
+def test_the_history_is_drawn_on_open_with_labelled_axes(server: Server, tmp_path: Path) -> None:
     with ShieldClient(server.url, token=TOKEN) as shield:
         shield.create_model("history")
     feed_episodes(server.url, "history", 60, seed=5)
@@ -157,8 +176,10 @@ def test_the_history_is_drawn_on_open_with_labelled_axes(server: Server, tmp_pat
         page.wait_for_function("view.drawn['chart-failures'] && view.drawn.tpm")
 
         # before any new step: the 60 episodes are on the charts, as the model counted them
-        assert page.evaluate("view.rows.map((r) => r.failures.collision)") == \
-            history["failures"]["collision"]
+        assert (
+            page.evaluate("view.rows.map((r) => r.failures.collision)")
+            == history["failures"]["collision"]
+        )
         drawn = page.evaluate("view.drawn")
         assert drawn["chart-revisions"]["points"] == 2 * 60  # per criterion, per episode
         assert drawn["chart-share"]["points"] == 60
@@ -170,14 +191,17 @@ def test_the_history_is_drawn_on_open_with_labelled_axes(server: Server, tmp_pat
         for name, chart in drawn.items():
             assert chart["xTitle"] and chart["yTitle"], name
             assert len(chart["xTicks"]) >= 3 and len(chart["yTicks"]) >= 3, (name, chart)
-            assert all(re.fullmatch(r"-?\d+(\.\d+)?[kM]?", t)
-                       for t in chart["xTicks"] + chart["yTicks"]), (name, chart)
+            assert all(
+                re.fullmatch(r"-?\d+(\.\d+)?[kM]?", t) for t in chart["xTicks"] + chart["yTicks"]
+            ), (name, chart)
         for chart in ("chart-revisions", "chart-share", "chart-failures"):
             assert drawn[chart]["xTitle"] == "episode"
             assert 50 <= float(drawn[chart]["xTicks"][-1]) <= 60, drawn[chart]["xTicks"]
         assert drawn["chart-share"]["yTitle"] == "revised actions [%]"
-        assert (drawn["states"]["xTitle"], drawn["states"]["yTitle"]) == ("headway [m]",
-                                                                          "v_ego [m/s]")
+        assert (drawn["states"]["xTitle"], drawn["states"]["yTitle"]) == (
+            "headway [m]",
+            "v_ego [m/s]",
+        )
         assert drawn["tpm"]["xTicks"][0] == "0" and drawn["tpm"]["scale"][-1] == "1"
         assert drawn["tpm"]["points"] > 0
 
@@ -191,10 +215,13 @@ def test_the_history_is_drawn_on_open_with_labelled_axes(server: Server, tmp_pat
         page.wait_for_function("view.rows.length == 61", timeout=5000)
         history = history_of(server.url, "history")
         last = page.evaluate("view.rows[view.rows.length - 1]")
-        assert last == {"episodes": 61, "steps": history["steps"][-1],
-                        "n_states": history["n_states"][-1],
-                        "interventions": {c: v[-1] for c, v in history["interventions"].items()},
-                        "failures": {c: v[-1] for c, v in history["failures"].items()}}
+        assert last == {
+            "episodes": 61,
+            "steps": history["steps"][-1],
+            "n_states": history["n_states"][-1],
+            "interventions": {c: v[-1] for c, v in history["interventions"].items()},
+            "failures": {c: v[-1] for c, v in history["failures"].items()},
+        }
         page.wait_for_function("view.drawn['chart-share'].points == 61")
     assert errors == []
 
@@ -205,7 +232,8 @@ def test_no_data_without_the_token(server: Server) -> None:
         page = browser.new_page()
         page.goto(f"{server.url}/dashboard")
         page.wait_for_function(
-            "document.getElementById('status').textContent.startsWith('no data')")
+            "document.getElementById('status').textContent.startsWith('no data')"
+        )
         assert "401" in page.locator("#status").inner_text()
         assert page.locator("#state-count").inner_text() == "0"
         browser.close()

@@ -21,20 +21,43 @@ from app.main import create_app
 from app.settings import Settings
 
 FIELDS = ("observation", "action", "stream", "event", "done", "applied_action", "learn", "shadow")
-CODES = {"invalid_json", "invalid_body", "invalid_observation", "invalid_action",
-         "unknown_criterion", "too_large"}
+CODES = {
+    "invalid_json",
+    "invalid_body",
+    "invalid_observation",
+    "invalid_action",
+    "unknown_criterion",
+    "too_large",
+}
 
-scalars = st.one_of(st.none(), st.booleans(), st.integers(-10**30, 10**30),
-                    st.floats(allow_nan=False, allow_infinity=False), st.text(max_size=8))
-json_values = st.recursive(scalars, lambda inner: st.one_of(
-    st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=4), inner, max_size=3)),
-    max_leaves=8)
+scalars = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**30), 10**30),
+    st.floats(allow_nan=False, allow_infinity=False),
+    st.text(max_size=8),
+)
+json_values = st.recursive(
+    scalars,
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=4), inner, max_size=3)
+    ),
+    max_leaves=8,
+)
 valid = st.fixed_dictionaries(
-    {"observation": st.lists(st.floats(-50, 250), min_size=3, max_size=3),
-     "action": st.floats(-3, 3)},
-    optional={"stream": st.sampled_from(["0", "car-1"]), "event": st.sampled_from(
-        ["collision", "large_distance"]), "done": st.just(True), "learn": st.booleans(),
-        "shadow": st.booleans(), "applied_action": st.floats(-3, 3)})
+    {
+        "observation": st.lists(st.floats(-50, 250), min_size=3, max_size=3),
+        "action": st.floats(-3, 3),
+    },
+    optional={
+        "stream": st.sampled_from(["0", "car-1"]),
+        "event": st.sampled_from(["collision", "large_distance"]),
+        "done": st.just(True),
+        "learn": st.booleans(),
+        "shadow": st.booleans(),
+        "applied_action": st.floats(-3, 3),
+    },
+)
 EXTREME = st.sampled_from([1e300, -1e300, 5e-324, -5e-324, 1.7976931348623157e308])
 WRONG = {  # well-typed values that only the model can refuse (or must survive)
     "observation": st.lists(st.one_of(st.floats(-50, 250), EXTREME), min_size=1, max_size=5),
@@ -90,8 +113,9 @@ def test_any_single_step_is_answered_or_refused_without_a_trace() -> None:
         @settings(max_examples=150)
         def check(body: dict[str, Any]) -> None:
             before, count = exact(c), version(c)
-            r = c.post("/revise", content=json.dumps(body),
-                       headers={"content-type": "application/json"})
+            r = c.post(
+                "/revise", content=json.dumps(body), headers={"content-type": "application/json"}
+            )
             if r.status_code == 200:
                 assert version(c) == count + learns(body)
                 assert r.json()["model_version"] == version(c)
@@ -122,8 +146,10 @@ def test_a_batch_with_any_step_broken_is_all_or_nothing() -> None:
 
 
 def test_any_websocket_frame_gets_one_reply_and_the_stream_goes_on() -> None:
-    with TestClient(create_app(Settings()), raise_server_exceptions=False) as c, \
-            c.websocket_connect("/ws") as ws:
+    with (
+        TestClient(create_app(Settings()), raise_server_exceptions=False) as c,
+        c.websocket_connect("/ws") as ws,
+    ):
 
         @given(st.one_of(steps.map(json.dumps), st.text(max_size=40)))
         @settings(max_examples=100)
@@ -143,15 +169,22 @@ def test_any_websocket_frame_gets_one_reply_and_the_stream_goes_on() -> None:
 
 
 mostly_valid = st.one_of(valid, valid, valid, broken())
-requests = st.lists(st.tuples(st.sampled_from(["default", "other"]), st.booleans(),
-                              st.lists(mostly_valid, min_size=1, max_size=3)),
-                    min_size=3, max_size=8)
+requests = st.lists(
+    st.tuples(
+        st.sampled_from(["default", "other"]),
+        st.booleans(),
+        st.lists(mostly_valid, min_size=1, max_size=3),
+    ),
+    min_size=3,
+    max_size=8,
+)
 
 
 @given(requests, st.sampled_from([10**6, 3]))  # the journal alone, or snapshots too
 @settings(max_examples=30)
 def test_after_a_crash_every_accepted_step_and_no_refused_one_is_replayed(
-        sequence: list[tuple[str, bool, list[dict[str, Any]]]], snapshot_every: int) -> None:
+    sequence: list[tuple[str, bool, list[dict[str, Any]]]], snapshot_every: int
+) -> None:
     """Steps and batches, some refused, on two models; then a second server starts on the same
     data directory before the first shuts down (as after a crash, only the snapshots and the
     journal tell it anything): its models are the first's, bit for bit."""

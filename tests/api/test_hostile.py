@@ -33,10 +33,39 @@ from tests.utils import rewrite_npz_member
 LIMIT = 8 * 2**20  # the test server's snapshot limit [bytes]
 NPZ = {"content-type": "application/x-npz"}
 
-EXTREME = st.sampled_from([
-    math.inf, -math.inf, math.nan, 1.7976931348623157e308, -1e308, 1e100, 1e13, 1e12, 1e7,
-    4097, 2**31, 2**62, 2**63, 2**64, 10**30, 5e-324, 1e-13, 1e-7, 0, 0.0, -1, -0.5, 0.5, 1,
-    2, 3, 16, 257, 1025])
+EXTREME = st.sampled_from(
+    [
+        math.inf,
+        -math.inf,
+        math.nan,
+        1.7976931348623157e308,
+        -1e308,
+        1e100,
+        1e13,
+        1e12,
+        1e7,
+        4097,
+        2**31,
+        2**62,
+        2**63,
+        2**64,
+        10**30,
+        5e-324,
+        1e-13,
+        1e-7,
+        0,
+        0.0,
+        -1,
+        -0.5,
+        0.5,
+        1,
+        2,
+        3,
+        16,
+        257,
+        1025,
+    ]
+)
 FIELDS = {  # section -> numeric fields (a list field: one number per observation name)
     "observation": ["low", "high", "knee"],
     "action": ["low", "high", "step"],
@@ -59,8 +88,11 @@ def configs(draw: st.DrawFn) -> dict[str, Any]:
         name = draw(st.sampled_from(FIELDS[section]))
         value = draw(EXTREME)
         if (section, name) in LISTS:
-            default = {"low": [0.0, 0.0, 0.0], "high": [32.0, 50.0, 32.0],
-                       "knee": [0.0, 20.0, 0.0]}[name]
+            default = {
+                "low": [0.0, 0.0, 0.0],
+                "high": [32.0, 50.0, 32.0],
+                "knee": [0.0, 20.0, 0.0],
+            }[name]
             value = [*default[:1], value, *default[2:]]
         config.setdefault(section, {})[name] = value
     if draw(st.booleans()):
@@ -72,37 +104,53 @@ def configs(draw: st.DrawFn) -> dict[str, Any]:
 
 def post(client: TestClient, path: str, body: Any) -> Any:
     """JSON as Python writes it: NaN and Infinity included."""
-    return client.post(path, content=json.dumps(body),
-                       headers={"content-type": "application/json"})
+    return client.post(path, content=json.dumps(body), headers={"content-type": "application/json"})
 
 
 def exercise(client: TestClient, name: str) -> None:
     """Every route of a model, none answering 5xx: steps on two streams (a failure, an end
     of episode, a what-if), its views, its snapshots in both forms restored as another."""
-    size = len(client.get(f"/models/{name}", params={"tpm": "none", "exact": False})
-               .json()["config"]["observation"]["names"])
+    size = len(
+        client.get(f"/models/{name}", params={"tpm": "none", "exact": False}).json()["config"][
+            "observation"
+        ]["names"]
+    )
     rng = np.random.default_rng(0)
     answers = []
     for i in range(12):
-        body: dict[str, Any] = {"observation": rng.uniform(-5, 60, size).tolist(),
-                                "action": float(rng.uniform(-3, 3)), "stream": f"s{i % 2}"}
+        body: dict[str, Any] = {
+            "observation": rng.uniform(-5, 60, size).tolist(),
+            "action": float(rng.uniform(-3, 3)),
+            "stream": f"s{i % 2}",
+        }
         if i == 7:
             body.update(event="collision", done=True, action=None)
         if i == 9:
             body["learn"] = False
         answers.append(post(client, f"/models/{name}/revise", body))
-    answers.append(post(client, f"/models/{name}/revise/batch", {"steps": [
-        {"observation": [1.0] * size, "action": 0.0}] * 3}))
-    answers += [client.get(f"/models/{name}", params={"tpm": tpm}) for tpm in
-                ("sparse", "dense", "none")]
+    answers.append(
+        post(
+            client,
+            f"/models/{name}/revise/batch",
+            {"steps": [{"observation": [1.0] * size, "action": 0.0}] * 3},
+        )
+    )
+    answers += [
+        client.get(f"/models/{name}", params={"tpm": tpm}) for tpm in ("sparse", "dense", "none")
+    ]
     answers.append(client.get(f"/models/{name}/states/0"))
     npz = client.get(f"/models/{name}", params={"format": "npz"})
     answers.append(npz)
     snapshot = client.get(f"/models/{name}", params={"tpm": "none"})
     answers.append(snapshot)
     if snapshot.status_code == 200:
-        answers.append(client.put(f"/models/{name}-copy", content=snapshot.content,
-                                  headers={"content-type": "application/json"}))
+        answers.append(
+            client.put(
+                f"/models/{name}-copy",
+                content=snapshot.content,
+                headers={"content-type": "application/json"},
+            )
+        )
     if npz.status_code == 200:
         answers.append(client.put(f"/models/{name}-copy", content=npz.content, headers=NPZ))
     answers += [client.get("/models"), client.get("/metrics"), client.get("/readyz")]
@@ -113,8 +161,9 @@ def exercise(client: TestClient, name: str) -> None:
 
 @pytest.fixture(scope="module")
 def client() -> Iterator[TestClient]:
-    with TestClient(create_app(Settings(max_snapshot_bytes=LIMIT)),
-                    raise_server_exceptions=False) as c:
+    with TestClient(
+        create_app(Settings(max_snapshot_bytes=LIMIT)), raise_server_exceptions=False
+    ) as c:
         yield c
 
 
@@ -128,8 +177,7 @@ def test_no_accepted_configuration_leaves_a_model_that_answers_5xx(client: TestC
         assert r.status_code in (201, 422), r.text
         if r.status_code == 422:
             error = r.json()["error"]
-            assert error["code"] == "invalid_config" and error["field"].startswith("config."), \
-                error
+            assert error["code"] == "invalid_config" and error["field"].startswith("config."), error
             assert client.get("/models/x").status_code == 404  # nothing made
             return
         accepted.append(config)
@@ -144,26 +192,42 @@ def test_no_accepted_configuration_leaves_a_model_that_answers_5xx(client: TestC
     assert accepted  # the property saw accepted models, not refusals only
 
 
-@pytest.mark.parametrize(("config", "field"), [
-    ({"clustering": {"min_variance": math.inf}}, "config.clustering.min_variance"),
-    ({"action": {"low": 0, "high": 1e7, "step": 1}}, "config.action.step"),
-    ({"action": {"low": 0, "high": 1e9, "step": 1}}, "config.action.step"),
-    ({"action": {"low": 0, "high": 1000, "step": 1}}, "config.action.step"),  # the server's
-    ({"limits": {"belief_top_k": 10**12}}, "config.limits.belief_top_k"),
-    ({"limits": {"max_states": 100_000, "max_streams": 1_000_000}}, "config.limits.max_states"),
-    ({"limits": {"tpm_backend": "dense"}}, "config.limits.max_states"),
-    ({"observation": {"names": [f"x{i}" for i in range(100)], "low": [0] * 100,
-                      "high": [1] * 100, "knee": []}, "criteria": [
-        {"name": "far", "direction": "increase"}]}, "config.observation.names"),
-    ({"transitions": {"prior": 1e308}}, "config.transitions.prior"),
-    ({"clustering": {"epsilon": 1e308}}, "config.clustering.epsilon"),
-])
+@pytest.mark.parametrize(
+    ("config", "field"),
+    [
+        ({"clustering": {"min_variance": math.inf}}, "config.clustering.min_variance"),
+        ({"action": {"low": 0, "high": 1e7, "step": 1}}, "config.action.step"),
+        ({"action": {"low": 0, "high": 1e9, "step": 1}}, "config.action.step"),
+        ({"action": {"low": 0, "high": 1000, "step": 1}}, "config.action.step"),  # the server's
+        ({"limits": {"belief_top_k": 10**12}}, "config.limits.belief_top_k"),
+        ({"limits": {"max_states": 100_000, "max_streams": 1_000_000}}, "config.limits.max_states"),
+        ({"limits": {"tpm_backend": "dense"}}, "config.limits.max_states"),
+        (
+            {
+                "observation": {
+                    "names": [f"x{i}" for i in range(100)],
+                    "low": [0] * 100,
+                    "high": [1] * 100,
+                    "knee": [],
+                },
+                "criteria": [{"name": "far", "direction": "increase"}],
+            },
+            "config.observation.names",
+        ),
+        ({"transitions": {"prior": 1e308}}, "config.transitions.prior"),
+        ({"clustering": {"epsilon": 1e308}}, "config.clustering.epsilon"),
+    ],
+)
 def test_the_issue_s_configurations_are_refused_naming_their_field(
-        client: TestClient, config: dict[str, Any], field: str) -> None:
+    client: TestClient, config: dict[str, Any], field: str
+) -> None:
     r = post(client, "/models", {"name": "y", "config": config})
     assert r.status_code == 422, r.text
-    assert r.json()["error"] | {"message": ""} == {"code": "invalid_config", "message": "",
-                                                   "field": field}
+    assert r.json()["error"] | {"message": ""} == {
+        "code": "invalid_config",
+        "message": "",
+        "field": field,
+    }
 
 
 @pytest.fixture(scope="module")
@@ -171,13 +235,21 @@ def snapshots(client: TestClient) -> dict[str, dict[str, Any]]:
     """The exact JSON snapshots of a risk model and a paper model on dense matrices, after
     three episodes and a step of an open stream."""
     out = {}
-    for name, config in (("risky", {}), ("paper", {"reviser": {"method": "paper"}, "limits": {
-            "tpm_backend": "dense", "max_states": 200}})):
+    for name, config in (
+        ("risky", {}),
+        (
+            "paper",
+            {"reviser": {"method": "paper"}, "limits": {"tpm_backend": "dense", "max_states": 200}},
+        ),
+    ):
         assert post(client, "/models", {"name": name, "config": config}).status_code == 201
         for _ in range(3):
             episode(client, f"/models/{name}/revise")
-        post(client, f"/models/{name}/revise", {"observation": [12.0, 30.0, 11.0],
-                                               "action": 0.3, "stream": "open"})
+        post(
+            client,
+            f"/models/{name}/revise",
+            {"observation": [12.0, 30.0, 11.0], "action": 0.3, "stream": "open"},
+        )
         out[name] = client.get(f"/models/{name}", params={"tpm": "none"}).json()["exact"]
     return out
 
@@ -236,19 +308,22 @@ def restore_and_exercise(client: TestClient, body: bytes, headers: dict[str, str
 
 
 def test_no_accepted_json_snapshot_leaves_a_model_that_answers_5xx(
-        client: TestClient, snapshots: dict[str, dict[str, Any]]) -> None:
+    client: TestClient, snapshots: dict[str, dict[str, Any]]
+) -> None:
 
     @given(mutations(snapshots))
     @settings(max_examples=120, deadline=None)
     def check(snapshot: dict[str, Any]) -> None:
-        restore_and_exercise(client, json.dumps({"exact": snapshot}).encode(),
-                             {"content-type": "application/json"})
+        restore_and_exercise(
+            client, json.dumps({"exact": snapshot}).encode(), {"content-type": "application/json"}
+        )
 
     check()
 
 
 def test_no_accepted_npz_snapshot_leaves_a_model_that_answers_5xx(
-        client: TestClient, snapshots: dict[str, dict[str, Any]]) -> None:
+    client: TestClient, snapshots: dict[str, dict[str, Any]]
+) -> None:
 
     @given(mutations(snapshots))
     @settings(max_examples=120, deadline=None)
@@ -262,18 +337,21 @@ def test_no_accepted_npz_snapshot_leaves_a_model_that_answers_5xx(
     check()
 
 
-@pytest.mark.parametrize(("change", "field"), [
-    (("transitions", "actions", "learned", "nnz", "data"), "transitions.actions.{a}.row_sum"),
-    (("counters", "steps"), "clustering.k"),
-    (("clustering", "k"), "clustering.k"),
-    (("transitions", "backend"), "transitions.backend"),
-    (("config", "clustering", "epsilon"), "config.clustering.epsilon"),
-    (("config", "limits", "belief_top_k"), "config.limits.belief_top_k"),
-    (("streams", "open", "prob", "data"), "streams.open.prob"),
-])
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        (("transitions", "actions", "learned", "nnz", "data"), "transitions.actions.{a}.row_sum"),
+        (("counters", "steps"), "clustering.k"),
+        (("clustering", "k"), "clustering.k"),
+        (("transitions", "backend"), "transitions.backend"),
+        (("config", "clustering", "epsilon"), "config.clustering.epsilon"),
+        (("config", "limits", "belief_top_k"), "config.limits.belief_top_k"),
+        (("streams", "open", "prob", "data"), "streams.open.prob"),
+    ],
+)
 def test_the_issue_s_snapshots_are_refused_naming_their_field(
-        client: TestClient, snapshots: dict[str, dict[str, Any]], change: tuple[Any, ...],
-        field: str) -> None:
+    client: TestClient, snapshots: dict[str, dict[str, Any]], change: tuple[Any, ...], field: str
+) -> None:
     """nnz 0 under learned mass, counts beyond the steps (2^62 of them too), clustering.k
     1e7, an unknown backend, a configuration key missing, a belief scaled past 1."""
     broken = copy.deepcopy(snapshots["risky"])
@@ -297,14 +375,18 @@ def test_the_issue_s_snapshots_are_refused_naming_their_field(
         del part[last]
     else:
         part[last] = [p * 2 for p in part[last]]
-    r = client.put("/models/b", content=json.dumps({"exact": broken}),
-                   headers={"content-type": "application/json"})
+    r = client.put(
+        "/models/b",
+        content=json.dumps({"exact": broken}),
+        headers={"content-type": "application/json"},
+    )
     assert r.status_code == 422, r.text
     assert r.json()["error"]["field"] == field.format(a=a), r.text
 
 
 def test_a_count_beyond_any_model_s_life_is_refused(
-        client: TestClient, snapshots: dict[str, dict[str, Any]]) -> None:
+    client: TestClient, snapshots: dict[str, dict[str, Any]]
+) -> None:
     broken = copy.deepcopy(snapshots["risky"])
     broken["counters"]["steps"] = broken["counters"]["model_version"] = 2**62
     r = client.put("/models/b", json={"exact": broken})
@@ -315,13 +397,16 @@ def with_member(npz: bytes, name: str, size: int) -> bytes:
     """``npz`` with one more member: a valid float64 array of ``size`` bytes of zeros, a few
     hundred kilobytes compressed."""
     buffer = io.BytesIO()
-    with zipfile.ZipFile(io.BytesIO(npz)) as source, \
-            zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as target:
+    with (
+        zipfile.ZipFile(io.BytesIO(npz)) as source,
+        zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as target,
+    ):
         for info in source.infolist():
             target.writestr(info, source.read(info))
         header = io.BytesIO()
-        np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False,
-                                                      "shape": (size // 8,)})
+        np.lib.format.write_array_header_1_0(
+            header, {"descr": "<f8", "fortran_order": False, "shape": (size // 8,)}
+        )
         with target.open(name, "w", force_zip64=True) as member:
             member.write(header.getvalue())
             chunk = bytes(2**20)
@@ -344,15 +429,19 @@ def test_a_member_the_format_does_not_name_is_refused_before_it_is_inflated() ->
             tracemalloc.stop()
         assert r.status_code == 422, r.text
         assert r.json()["error"] | {"message": ""} == {
-            "code": "invalid_snapshot", "message": "", "field": "padding"}
+            "code": "invalid_snapshot",
+            "message": "",
+            "field": "padding",
+        }
         assert peak < 16 * 2**20, peak  # the member's 200 MiB were never inflated
         assert c.put("/models/padded", content=npz, headers=NPZ).status_code == 200
 
 
 def test_a_member_whose_size_differs_from_its_header_is_refused(client: TestClient) -> None:
     npz = client.get("/model", params={"format": "npz"}).content
-    trailing = rewrite_npz_member(npz, "/clustering/beta.npy",
-                                  lambda data: data + bytes(4096))  # bytes no array holds
+    trailing = rewrite_npz_member(
+        npz, "/clustering/beta.npy", lambda data: data + bytes(4096)
+    )  # bytes no array holds
     r = client.put("/models/trailing", content=trailing, headers=NPZ)
     assert r.status_code == 422 and r.json()["error"]["field"] == "/clustering/beta", r.text
 
@@ -363,4 +452,7 @@ def test_a_json_snapshot_beyond_its_share_of_the_limit_is_413(client: TestClient
     body = b'{"exact": {"pad": "' + b"x" * (LIMIT // 8) + b'"}}'
     r = client.put("/models/big", content=body, headers={"content-type": "application/json"})
     assert r.status_code == 413 and r.json()["error"] | {"message": ""} == {
-        "code": "too_large", "message": "", "field": "body"}, r.text
+        "code": "too_large",
+        "message": "",
+        "field": "body",
+    }, r.text

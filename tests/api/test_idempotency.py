@@ -18,7 +18,8 @@ def version(client: TestClient, name: str = "default") -> int:
 
 
 def test_a_step_sent_again_over_http_is_answered_with_its_first_decision(
-        client: TestClient) -> None:
+    client: TestClient,
+) -> None:
     first = client.post("/revise", json={**STEP, "idempotency_key": "a"})
     client.post("/revise", json={**STEP, "idempotency_key": "b"})
     again = client.post("/revise", json={**STEP, "idempotency_key": "a"})
@@ -38,7 +39,8 @@ def test_a_batch_sent_again_is_answered_with_its_first_decisions(client: TestCli
 
 
 def test_a_step_sent_again_over_a_websocket_is_answered_with_its_first_decision(
-        client: TestClient) -> None:
+    client: TestClient,
+) -> None:
     with client.websocket_connect("/ws") as ws:
         ws.send_json({**STEP, "idempotency_key": "w"})
         first = ws.receive_json()
@@ -51,8 +53,7 @@ def test_a_step_sent_again_over_a_websocket_is_answered_with_its_first_decision(
     assert version(client) == 1
 
 
-def test_a_key_sent_with_another_step_is_refused_and_changes_nothing(
-        client: TestClient) -> None:
+def test_a_key_sent_with_another_step_is_refused_and_changes_nothing(client: TestClient) -> None:
     client.post("/revise", json={**STEP, "idempotency_key": "k"})
     r = client.post("/revise", json={**STEP, "action": -1.0, "idempotency_key": "k"})
     assert r.status_code == 422

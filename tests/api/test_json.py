@@ -24,8 +24,9 @@ def test_orjson_writes_the_records_to_dict_does() -> None:
         for t in range(3000):  # a point that crashes when it goes fast near a wall
             x = float(t % 40)
             event = "collision" if x == 39 else None
-            decision = shield.step([10.0, 40.0 - x, 10.0], None if event else 2.0,
-                                   event=event, done=event is not None)
+            decision = shield.step(
+                [10.0, 40.0 - x, 10.0], None if event else 2.0, event=event, done=event is not None
+            )
             revised += decision.revised
             written = orjson.loads(to_json(decision))
             assert written == json.loads(json.dumps(fields(decision)))
@@ -42,16 +43,16 @@ def fields(decision: Decision) -> dict[str, Any]:
 
 def test_the_api_schema_names_the_records_fields_and_validates_every_kind_of_record() -> None:
     assert list(schemas.Decision.model_fields) == [f.name for f in dataclasses.fields(Decision)]
-    assert list(schemas.Candidate.model_fields) == [f.name for f in
-                                                    dataclasses.fields(Candidate)]
+    assert list(schemas.Candidate.model_fields) == [f.name for f in dataclasses.fields(Candidate)]
     reasons: set[str] = set()
     for name in ("default", "paper"):
         shield = Shield(preset(name))
         for t in range(3000):
             x = float(t % 40)
             event = "collision" if x == 39 else None
-            decision = shield.step([10.0, 40.0 - x, 10.0], None if event else 2.0,
-                                   event=event, done=event is not None)
+            decision = shield.step(
+                [10.0, 40.0 - x, 10.0], None if event else 2.0, event=event, done=event is not None
+            )
             written = orjson.loads(to_json(decision))
             assert schemas.Decision.model_validate(written).model_dump() == written
             reasons.add(decision.reason)

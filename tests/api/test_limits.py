@@ -35,7 +35,10 @@ def test_a_server_holds_at_most_max_models_and_max_states_a_model() -> None:
         r = client.post("/models", json=big)
         assert r.status_code == 422
         assert r.json()["error"] | {"message": ""} == {
-            "code": "invalid_config", "message": "", "field": "config.limits.max_states"}
+            "code": "invalid_config",
+            "message": "",
+            "field": "config.limits.max_states",
+        }
         snapshot = client.get("/models/m1").json()
         snapshot["exact"]["config"]["limits"]["max_states"] = 20_001
         r = client.put("/models/m1", json=snapshot)

@@ -16,7 +16,6 @@ schema = schemathesis.openapi.from_asgi("/openapi.json", create_app(Settings()))
 
 
 @schema.parametrize()
-@settings(max_examples=15, deadline=None, derandomize=True,
-          suppress_health_check=list(HealthCheck))
+@settings(max_examples=15, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 def test_the_service_keeps_to_its_schema(case: schemathesis.Case) -> None:
     case.call_and_validate(checks=[not_a_server_error, status_code_conformance])

@@ -27,19 +27,31 @@ from client.sim.lead import synthetic
 
 ARM = "ddpg+shield"
 CONFIG = runner.ExperimentConfig(
-    arms=(ARM,), runs=3, episodes=5, seed=7, lead="synthetic",
+    arms=(ARM,),
+    runs=3,
+    episodes=5,
+    seed=7,
+    lead="synthetic",
     ddpg={"warmup": 64, "buffer_size": 5000},
-    shield_config={"reviser": {"activate_after_episodes": 2}})
+    shield_config={"reviser": {"activate_after_episodes": 2}},
+)
 
 
-IDENTITY = {**CONFIG.identity(), "arm": ARM, "group": [0, 1, 2],
-            "learning": {"lockstep": True, "device": "cpu"}}
+IDENTITY = {
+    **CONFIG.identity(),
+    "arm": ARM,
+    "group": [0, 1, 2],
+    "learning": {"lockstep": True, "device": "cpu"},
+}
 
 
 def recorded(directory: Path, config: runner.ExperimentConfig = CONFIG) -> list[EpisodeRecord]:
     """Every run's episodes, the wall time left out."""
-    return [dataclasses.replace(r, wall_s=0.0) for run in range(config.runs)
-            for r in records.read(records.path_for(directory, ARM, run))[1]]
+    return [
+        dataclasses.replace(r, wall_s=0.0)
+        for run in range(config.runs)
+        for r in records.read(records.path_for(directory, ARM, run))[1]
+    ]
 
 
 def after(steps: int) -> Callable[[], bool]:
@@ -96,7 +108,8 @@ def test_an_ensemble_goes_on_exactly_from_its_state() -> None:
 
 @pytest.mark.parametrize("every", [97, 300])
 def test_a_group_stopped_again_and_again_records_what_an_uninterrupted_one_records(
-        tmp_path: Path, every: int, uninterrupted: list[EpisodeRecord]) -> None:
+    tmp_path: Path, every: int, uninterrupted: list[EpisodeRecord]
+) -> None:
     """Stops mid-episode, between a run's last episode and the others', and after runs are
     done: each stop leaves a checkpoint, each call goes on from it, and the records come out
     identical to the bit."""
@@ -110,7 +123,8 @@ def test_a_group_stopped_again_and_again_records_what_an_uninterrupted_one_recor
 
 
 def test_a_crashed_group_goes_on_from_its_last_checkpoint(
-        tmp_path: Path, uninterrupted: list[EpisodeRecord]) -> None:
+    tmp_path: Path, uninterrupted: list[EpisodeRecord]
+) -> None:
     """Episodes recorded after the last checkpoint are played again and checked (the run
     has 974 steps)."""
 
@@ -144,8 +158,11 @@ def test_a_stopped_group_keeps_the_models_of_its_checkpoint(tmp_path: Path) -> N
     saved = checkpoint.load(checkpoint.pending(tmp_path)[0], IDENTITY)
     assert saved is not None
     for run in range(CONFIG.runs):
-        kept = json.loads(gzip.decompress(
-            (tmp_path / "models" / f"ddpg_shield__run{run:02d}.json.gz").read_bytes()))
+        kept = json.loads(
+            gzip.decompress(
+                (tmp_path / "models" / f"ddpg_shield__run{run:02d}.json.gz").read_bytes()
+            )
+        )
         assert kept == {"exact": json.loads(json.dumps(saved["places"][run]["model"]))}
         assert Shield.from_snapshot(codec.from_json(kept["exact"])).n_states > 0
 
@@ -169,7 +186,8 @@ def test_a_checkpoint_of_another_format_is_refused(tmp_path: Path) -> None:
 
 
 def test_a_group_goes_on_against_a_fresh_service(
-        tmp_path: Path, uninterrupted: list[EpisodeRecord]) -> None:
+    tmp_path: Path, uninterrupted: list[EpisodeRecord]
+) -> None:
     """The service that held the models is gone when the group goes on (a new machine, a
     new session): the models come back from the checkpoint."""
     from tests.conftest import start_server
@@ -178,32 +196,66 @@ def test_a_group_goes_on_against_a_fresh_service(
         server = start_server(tmp_path / f"data-{stops}", "--fsync", "never")
         remote = dataclasses.replace(CONFIG, shield=server.url, transport="batch")
         try:
-            run_lockstep(remote, ARM, tmp_path / "out",
-                                stop=after(400) if stops == 1 else None)
+            run_lockstep(remote, ARM, tmp_path / "out", stop=after(400) if stops == 1 else None)
         finally:
             server.stop()
     assert recorded(tmp_path / "out") == uninterrupted
 
 
 def test_the_command_stops_at_its_deadline_and_goes_on(tmp_path: Path) -> None:
-    command = [sys.executable, "-m", "client", "run", "--arms", ARM, "--runs", "2",
-               "--episodes", "40", "--seed", "7", "--lead", "synthetic", "--lockstep",
-               "--workers", "1", "--out", str(tmp_path)]
+    command = [
+        sys.executable,
+        "-m",
+        "client",
+        "run",
+        "--arms",
+        ARM,
+        "--runs",
+        "2",
+        "--episodes",
+        "40",
+        "--seed",
+        "7",
+        "--lead",
+        "synthetic",
+        "--lockstep",
+        "--workers",
+        "1",
+        "--out",
+        str(tmp_path),
+    ]
     other = records.path_for(tmp_path, "idm", 0)  # another arm, finished: not counted
     records.start(other, {"identity": "an arm run before"}, 100)
     for episode in range(1, 101):
-        records.append(other, EpisodeRecord(
-            arm="idm", run=0, episode=episode, seed=1, steps=800, outcome="success",
-            interventions={}, revisions_would=0, speed_diff_n=800, speed_diff_mean=0.1,
-            speed_diff_var=0.1, episode_return=-1.0, n_states=0, wall_s=0.1))
-    first = subprocess.run([*command, "--stop-after", "0.06"], capture_output=True, text=True,
-                           timeout=600)
+        records.append(
+            other,
+            EpisodeRecord(
+                arm="idm",
+                run=0,
+                episode=episode,
+                seed=1,
+                steps=800,
+                outcome="success",
+                interventions={},
+                revisions_would=0,
+                speed_diff_n=800,
+                speed_diff_mean=0.1,
+                speed_diff_var=0.1,
+                episode_return=-1.0,
+                n_states=0,
+                wall_s=0.1,
+            ),
+        )
+    first = subprocess.run(
+        [*command, "--stop-after", "0.06"], capture_output=True, text=True, timeout=600
+    )
     assert first.returncode == 0, first.stderr
     assert "stopped at the deadline with" in first.stdout
     assert not (tmp_path / "table.md").exists()
     then = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert then.returncode == 0, then.stderr
     assert (tmp_path / "table.md").exists() and not checkpoint.pending(tmp_path)
-    refused = subprocess.run([*command, "--stop-after", "1", "--trace"], capture_output=True,
-                             text=True)
+    refused = subprocess.run(
+        [*command, "--stop-after", "1", "--trace"], capture_output=True, text=True
+    )
     assert refused.returncode == 2 and "--trace" in refused.stderr

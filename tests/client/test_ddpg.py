@@ -23,10 +23,10 @@ class AutogradDDPG:
             self.actor_target, self.critic_target = Actor(config.hidden), Critic(config.hidden)
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.critic_target.load_state_dict(self.critic.state_dict())
-        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=config.actor_lr,
-                                          foreach=True)
-        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=config.critic_lr,
-                                           foreach=True)
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=config.actor_lr, foreach=True)
+        self.critic_opt = torch.optim.Adam(
+            self.critic.parameters(), lr=config.critic_lr, foreach=True
+        )
         self.buffer = ReplayBuffer(config.buffer_size, seed + 1)
 
     def online(self) -> list[torch.Tensor]:
@@ -54,10 +54,13 @@ class AutogradDDPG:
 
     def moments(self, name: str) -> torch.Tensor:
         """One of Adam's moments of every layer, laid out as the learner's flat buffers."""
-        return torch.cat([opt.state[p][name].reshape(-1)
-                          for opt, net in ((self.actor_opt, self.actor),
-                                           (self.critic_opt, self.critic))
-                          for p in net.parameters()])
+        return torch.cat(
+            [
+                opt.state[p][name].reshape(-1)
+                for opt, net in ((self.actor_opt, self.actor), (self.critic_opt, self.critic))
+                for p in net.parameters()
+            ]
+        )
 
 
 def flat(params: list[torch.Tensor]) -> torch.Tensor:
@@ -73,9 +76,13 @@ def test_the_update_is_autograds_and_adams_bit_for_bit() -> None:
     learner, reference = DDPG(config, 4), AutogradDDPG(config, 4)
     rng = np.random.default_rng(0)
     for _ in range(500):
-        transition = (rng.uniform(0, 30, 4).astype(np.float32), rng.uniform(-2, 2),
-                      rng.uniform(-3, 0), rng.uniform(0, 30, 4).astype(np.float32),
-                      rng.random() < 0.05)
+        transition = (
+            rng.uniform(0, 30, 4).astype(np.float32),
+            rng.uniform(-2, 2),
+            rng.uniform(-3, 0),
+            rng.uniform(0, 30, 4).astype(np.float32),
+            rng.random() < 0.05,
+        )
         learner.buffer.add(*transition)
         reference.buffer.add(*transition)
     assert torch.equal(flat(reference.online()), learner._online)
@@ -83,15 +90,17 @@ def test_the_update_is_autograds_and_adams_bit_for_bit() -> None:
         learner.update()
         reference.update()
     assert torch.equal(flat(reference.online()), learner._online)
-    assert torch.equal(flat([*reference.actor_target.parameters(),
-                             *reference.critic_target.parameters()]), learner._target)
+    assert torch.equal(
+        flat([*reference.actor_target.parameters(), *reference.critic_target.parameters()]),
+        learner._target,
+    )
     # the modules are views of the flat buffers: what acts is what learned
-    assert torch.equal(flat([*learner.actor.parameters(), *learner.critic.parameters()]),
-                       learner._online)
+    assert torch.equal(
+        flat([*learner.actor.parameters(), *learner.critic.parameters()]), learner._online
+    )
     obs = np.array([20.0, 30.0, 18.0, 0.5], np.float32)
     with torch.no_grad():
         acted = float(reference.actor(torch.from_numpy(DDPG.scale(obs))[None])[0, 0])
     assert learner.act(obs, explore=False) == acted
     assert learner._steps.tolist() == [1000.0, 1000.0]
     assert_moments_are_adams(learner._moments, reference.moments)
-

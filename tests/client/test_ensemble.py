@@ -29,8 +29,13 @@ ACTION_TOLERANCE = 1e-4
 STEPS = {"cpu": 300, "cuda": 100}
 
 
-DEVICES = ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
-    not torch.cuda.is_available(), reason="no CUDA device here"))]
+DEVICES = [
+    "cpu",
+    pytest.param(
+        "cuda",
+        marks=pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device here"),
+    ),
+]
 
 
 @pytest.mark.parametrize("device", DEVICES)
@@ -45,8 +50,11 @@ def test_ensemble_members_learn_like_separate_runs(device: str) -> None:
     if device == "cuda":
         assert ensemble._graph is not None  # the replays were tested, not eager updates
     greedy = ensemble.act(obs, explore=False)
-    np.testing.assert_allclose(greedy, [a.act(o, explore=False) for a, o in
-                                        zip(single, obs, strict=True)], atol=ACTION_TOLERANCE)
+    np.testing.assert_allclose(
+        greedy,
+        [a.act(o, explore=False) for a, o in zip(single, obs, strict=True)],
+        atol=ACTION_TOLERANCE,
+    )
 
 
 class AutogradUpdate:
@@ -74,8 +82,9 @@ class AutogradUpdate:
         next_obs, done = batch[..., 6:10], batch[..., 10:11]
         with torch.no_grad():
             layers = len(self.actor)
-            next_q = self.q(self.targets[layers:], next_obs,
-                            self.mu(self.targets[:layers], next_obs))
+            next_q = self.q(
+                self.targets[layers:], next_obs, self.mu(self.targets[:layers], next_obs)
+            )
             target = reward + self.config.gamma * (1.0 - done) * next_q
         critic_loss = ((self.q(self.critic, obs, action) - target) ** 2).mean(dim=(1, 2)).sum()
         self.critic_opt.zero_grad()
@@ -94,13 +103,18 @@ class AutogradUpdate:
 
     def moments(self, name: str) -> torch.Tensor:
         """One of Adam's moments of every layer, laid out as the ensemble's flat buffers."""
-        return torch.cat([opt.state[p][name].reshape(-1)
-                          for opt, params in ((self.actor_opt, self.actor),
-                                              (self.critic_opt, self.critic)) for p in params])
+        return torch.cat(
+            [
+                opt.state[p][name].reshape(-1)
+                for opt, params in ((self.actor_opt, self.actor), (self.critic_opt, self.critic))
+                for p in params
+            ]
+        )
 
 
-def assert_moments_are_adams(moments: torch.Tensor,
-                             reference: Callable[[str], torch.Tensor]) -> None:
+def assert_moments_are_adams(
+    moments: torch.Tensor, reference: Callable[[str], torch.Tensor]
+) -> None:
     """Adam's first and second moments (the rows of ``moments``) equal ``torch.optim.Adam``'s
     (``reference("exp_avg")``, ``reference("exp_avg_sq")``) but for the subnormal ones, which
     the learners flush to zero where the CPU can; such moments, and dead units, must occur,
@@ -129,16 +143,22 @@ def test_the_update_is_autograds_and_adams_bit_for_bit() -> None:
     rng = np.random.default_rng(0)
     for member in ensemble.members:
         for _ in range(500):
-            member.remember(rng.uniform(0, 30, 4).astype(np.float32), rng.uniform(-2, 2),
-                            rng.uniform(-3, 0), rng.uniform(0, 30, 4).astype(np.float32),
-                            rng.random() < 0.05)
+            member.remember(
+                rng.uniform(0, 30, 4).astype(np.float32),
+                rng.uniform(-2, 2),
+                rng.uniform(-3, 0),
+                rng.uniform(0, 30, 4).astype(np.float32),
+                rng.random() < 0.05,
+            )
     reference = AutogradUpdate(ensemble)
     for _ in range(1000):
         ensemble.update()
         reference.update(ensemble._batch)  # the batch the ensemble drew
     state = ensemble.state()
-    assert torch.equal(state["online"], torch.cat([p.detach().reshape(-1) for p in
-                                                   [*reference.actor, *reference.critic]]))
+    assert torch.equal(
+        state["online"],
+        torch.cat([p.detach().reshape(-1) for p in [*reference.actor, *reference.critic]]),
+    )
     assert torch.equal(state["target"], torch.cat([p.reshape(-1) for p in reference.targets]))
     assert state["steps"].tolist() == [1000.0, 1000.0]
     assert_moments_are_adams(state["moments"], reference.moments)
@@ -164,8 +184,14 @@ def test_a_batch_drawn_into_rows_is_the_batch_a_run_draws() -> None:
 
 
 CONFIG = runner.ExperimentConfig(
-    arms=("ddpg+shield",), runs=3, episodes=5, seed=7, lead="synthetic",
-    ddpg={"warmup": 64}, shield_config={"reviser": {"activate_after_episodes": 2}})
+    arms=("ddpg+shield",),
+    runs=3,
+    episodes=5,
+    seed=7,
+    lead="synthetic",
+    ddpg={"warmup": 64},
+    shield_config={"reviser": {"activate_after_episodes": 2}},
+)
 
 
 def episodes(directory: Path, run: int) -> list[records.EpisodeRecord]:
@@ -173,8 +199,7 @@ def episodes(directory: Path, run: int) -> list[records.EpisodeRecord]:
 
 
 @pytest.mark.parametrize("update_first", [False, True])
-def test_lockstep_runs_record_what_separate_runs_record(tmp_path: Path,
-                                                        update_first: bool) -> None:
+def test_lockstep_runs_record_what_separate_runs_record(tmp_path: Path, update_first: bool) -> None:
     """Batched products round differently (about 1e-7 per action), and the shield's discrete
     choices (a new state or not, a bin edge) can turn that into a different episode once it
     acts. So: the episodes before the reviser switches on agree exactly, and every run's
@@ -188,10 +213,12 @@ def test_lockstep_runs_record_what_separate_runs_record(tmp_path: Path,
     for run in range(CONFIG.runs):
         a, b = episodes(separate, run), episodes(lockstep, run)
         assert [r.episode for r in b] == list(range(1, CONFIG.episodes + 1))
-        assert [(r.steps, r.outcome) for r in a[:before]] == \
-            [(r.steps, r.outcome) for r in b[:before]]
+        assert [(r.steps, r.outcome) for r in a[:before]] == [
+            (r.steps, r.outcome) for r in b[:before]
+        ]
         assert [r.episode_return for r in b[:before]] == pytest.approx(
-            [r.episode_return for r in a[:before]], rel=1e-4)
+            [r.episode_return for r in a[:before]], rel=1e-4
+        )
     # and a lockstep experiment resumes like any other
     assert run_lockstep(config, "ddpg+shield", lockstep) == 0
     bigger = dataclasses.replace(config, episodes=6)
@@ -204,10 +231,12 @@ def test_lockstep_is_for_ddpg_arms(tmp_path: Path) -> None:
         run_lockstep(dataclasses.replace(CONFIG, arms=("idm",)), "idm", tmp_path)
 
 
-@pytest.mark.parametrize(("transport", "update_first"),
-                         [("batch", False), ("ws", False), ("batch", True)])
+@pytest.mark.parametrize(
+    ("transport", "update_first"), [("batch", False), ("ws", False), ("batch", True)]
+)
 def test_lockstep_against_a_service_equals_lockstep_in_process(
-        tmp_path: Path, transport: str, update_first: bool) -> None:
+    tmp_path: Path, transport: str, update_first: bool
+) -> None:
     """One round per lockstep step (over the batch route one request carrying a step of every
     run's model; over WebSocket every run's frame sent before any reply is read): each model
     still sees its own steps in order and the learner's arithmetic is the in-process one, so
@@ -275,8 +304,9 @@ def test_lockstep_groups_record_every_run_and_how_it_learned(tmp_path: Path) -> 
     before = CONFIG.shield_config["reviser"]["activate_after_episodes"]
     for run in range(CONFIG.runs):
         a, b = episodes(whole, run), episodes(grouped, run)
-        assert [(r.steps, r.outcome) for r in a[:before]] == \
-            [(r.steps, r.outcome) for r in b[:before]]
+        assert [(r.steps, r.outcome) for r in a[:before]] == [
+            (r.steps, r.outcome) for r in b[:before]
+        ]
         assert len(b) == CONFIG.episodes
         header, _ = records.read(records.path_for(grouped, "ddpg+shield", run))
         assert header["learning"] == {"lockstep": True, "device": "cpu"}

@@ -85,8 +85,11 @@ def test_reward_is_zero_at_the_ideal_point() -> None:
 def test_a_failure_penalty_lowers_the_reward_of_the_failing_step_only() -> None:
     rewards = {}
     for penalty in (0.0, 60.0):
-        env = CarFollowingEnv(lead=lead.synthetic(2), start=StartConfig(headway=(20.0, 20.0)),
-                              reward=RewardConfig(failure_penalty=penalty))
+        env = CarFollowingEnv(
+            lead=lead.synthetic(2),
+            start=StartConfig(headway=(20.0, 20.0)),
+            reward=RewardConfig(failure_penalty=penalty),
+        )
         env.reset(seed=0)
         rewards[penalty] = []
         while True:

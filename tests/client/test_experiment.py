@@ -25,9 +25,14 @@ from client.experiment.records import EpisodeRecord
 from client.sim.car_following import RewardConfig
 from tests.conftest import free_port
 
-CONFIG = runner.ExperimentConfig(arms=("idm-aggressive", "idm-aggressive+shield"), runs=1,
-                                 episodes=8, seed=3, lead="synthetic",
-                                 shield_config={"reviser": {"activate_after_episodes": 2}})
+CONFIG = runner.ExperimentConfig(
+    arms=("idm-aggressive", "idm-aggressive+shield"),
+    runs=1,
+    episodes=8,
+    seed=3,
+    lead="synthetic",
+    shield_config={"reviser": {"activate_after_episodes": 2}},
+)
 
 
 def without_wall(rs: list[EpisodeRecord]) -> list[EpisodeRecord]:
@@ -76,13 +81,18 @@ def test_records_made_under_other_shield_defaults_are_refused(tmp_path: Path) ->
 
 
 def test_records_from_before_a_switch_existed_keep_the_value_it_was_added_with(
-        tmp_path: Path) -> None:
+    tmp_path: Path,
+) -> None:
     """``reviser.one_sided`` was added off and is on by default now: a header of the stored
     format's version 1 that lacks it ran with it off, so only the overrides that turn it off
     again go on with those records."""
     arm = "idm-aggressive+shield"
-    off = dataclasses.replace(CONFIG, shield_config={  # (version 1's risk reviser: removed)
-        "reviser": {"method": "paper", "activate_after_episodes": 2, "one_sided": False}})
+    off = dataclasses.replace(
+        CONFIG,
+        shield_config={  # (version 1's risk reviser: removed)
+            "reviser": {"method": "paper", "activate_after_episodes": 2, "one_sided": False}
+        },
+    )
     runner.run_one(off, arm, 0, tmp_path)
     path = records.path_for(tmp_path, arm, 0)
     lines = path.read_text().splitlines(keepends=True)
@@ -116,17 +126,32 @@ def test_records_carry_their_reward_constants_and_refuse_others(tmp_path: Path) 
         runner.run_one(CONFIG, arm, 0, tmp_path)
 
 
-def record(run: int, episode: int, outcome: str, n: int = 10, mean: float = 1.0,
-           var: float = 0.0) -> EpisodeRecord:
-    return EpisodeRecord(arm="a", run=run, episode=episode, seed=run, steps=n, outcome=outcome,
-                         speed_diff_n=n, speed_diff_mean=mean, speed_diff_var=var,
-                         interventions={"collision": 1} if outcome == "success" else {})
+def record(
+    run: int, episode: int, outcome: str, n: int = 10, mean: float = 1.0, var: float = 0.0
+) -> EpisodeRecord:
+    return EpisodeRecord(
+        arm="a",
+        run=run,
+        episode=episode,
+        seed=run,
+        steps=n,
+        outcome=outcome,
+        speed_diff_n=n,
+        speed_diff_mean=mean,
+        speed_diff_var=var,
+        interventions={"collision": 1} if outcome == "success" else {},
+    )
 
 
 def test_summary_numbers_by_hand() -> None:
-    rows = [record(0, 1, "collision"), record(0, 2, "success", 10, 1.0, 0.5),
-            record(0, 3, "success", 30, 3.0, 1.0), record(1, 1, "large_distance"),
-            record(1, 2, "success", 20, 2.0, 0.0), record(1, 3, "collision")]
+    rows = [
+        record(0, 1, "collision"),
+        record(0, 2, "success", 10, 1.0, 0.5),
+        record(0, 3, "success", 30, 3.0, 1.0),
+        record(1, 1, "large_distance"),
+        record(1, 2, "success", 20, 2.0, 0.0),
+        record(1, 3, "collision"),
+    ]
     s = report.summarise(rows)["a"]
     assert (s["episodes"], s["successes"], s["large_distance"], s["collision"]) == (6, 3, 1, 2)
     assert s["never_fails_after_per_run"] == [1, 3] and s["never_fails_after"] == 3
@@ -144,8 +169,9 @@ def test_summary_numbers_by_hand() -> None:
     assert (second["successes"], second["large_distance"], second["collision"]) == (1, 1, 1)
     assert first["late_success_rate"] == pytest.approx(2 / 3)
     assert second["late_interventions_per_episode"] == pytest.approx(1 / 3)
-    assert "| a | 1 | 1 | 3 | 1 (33.3%) | 1 | 1 | 3 | 1-3 | 33.3% | 0.3 | - |" in \
-        report.runs_table({"a": s})
+    assert "| a | 1 | 1 | 3 | 1 (33.3%) | 1 | 1 | 3 | 1-3 | 33.3% | 0.3 | - |" in report.runs_table(
+        {"a": s}
+    )
     later = [record(0, 101, "success"), record(1, 101, "collision"), record(0, 250, "success")]
     blocks = report.summarise(rows + later)["a"]["per_100_episodes"]
     assert [b["episodes"] for b in blocks] == ["1-3", "101-101", "201-250"]
@@ -161,42 +187,56 @@ def test_summary_numbers_by_hand() -> None:
 def test_blocks_side_by_side_align_by_episode() -> None:
     long = [record(0, e, "collision" if e in (1, 150) else "success") for e in range(1, 201)]
     short = [record(0, e, "large_distance" if e == 2 else "success") for e in range(1, 121)]
-    text = report.side_by_side({"long": report.summarise(long)["a"],
-                                "short": report.summarise(short)["a"]})
+    text = report.side_by_side(
+        {"long": report.summarise(long)["a"], "short": report.summarise(short)["a"]}
+    )
     assert text.splitlines()[0] == "Per block of 100 episodes, each cell long / short:"
     assert text.splitlines()[4:] == [
         "| 1-100 | 99.0% / 99.0% | 0 / 1 | 1 / 0 | 1.0 / 1.0 |",
         "| 101-200 / 101-120 | 99.0% / 100.0% | 0 / 0 | 1 / 0 | 1.0 / 1.0 |",
     ]
-    only_long = report.side_by_side({"short": report.summarise(short)["a"],
-                                     "long": report.summarise(long)["a"]})
+    only_long = report.side_by_side(
+        {"short": report.summarise(short)["a"], "long": report.summarise(long)["a"]}
+    )
     assert "| 101-120 / 101-200 | 100.0% / 99.0% |" in only_long
     late = [record(0, e, "success") for e in range(101, 111)]
-    gap = report.side_by_side({"early": report.summarise(short[:50])["a"],
-                               "late": report.summarise(late)["a"]})
-    assert gap.splitlines()[4:] == ["| 1-50 | 98.0% / - | 1 / - | 0 / - | 1.0 / - |",
-                                    "| 101-110 | - / 100.0% | - / 0 | - / 0 | - / 1.0 |"]
+    gap = report.side_by_side(
+        {"early": report.summarise(short[:50])["a"], "late": report.summarise(late)["a"]}
+    )
+    assert gap.splitlines()[4:] == [
+        "| 1-50 | 98.0% / - | 1 / - | 0 / - | 1.0 / - |",
+        "| 101-110 | - / 100.0% | - / 0 | - / 0 | - / 1.0 |",
+    ]
 
 
 def test_partings_name_the_first_episode_that_went_differently() -> None:
-    base = [record(0, e, "success") for e in range(1, 6)] + \
-        [record(1, e, "success") for e in range(1, 4)]
-    crashed = [record(0, e, "collision" if e == 4 else "success") for e in range(1, 6)] + \
-        [record(1, e, "success") for e in range(1, 3)]
+    base = [record(0, e, "success") for e in range(1, 6)] + [
+        record(1, e, "success") for e in range(1, 4)
+    ]
+    crashed = [record(0, e, "collision" if e == 4 else "success") for e in range(1, 6)] + [
+        record(1, e, "success") for e in range(1, 3)
+    ]
     assert report.parting(base, crashed) == {("a", 0): "4", ("a", 1): "none in 2"}
     slower = [dataclasses.replace(r, wall_s=9.0) for r in base]
     assert set(report.parting(base, slower).values()) == {"none in 5", "none in 3"}
-    drifted = [dataclasses.replace(r, speed_diff_mean=1.0 + 1e-12) if r.episode >= 2 else r
-               for r in crashed]  # another machine's rounding, from episode 2 on
-    assert report.parting(base, drifted) == {("a", 0): "4 (rounding from 2)",
-                                             ("a", 1): "none in 2 (rounding from 2)"}
+    drifted = [
+        dataclasses.replace(r, speed_diff_mean=1.0 + 1e-12) if r.episode >= 2 else r
+        for r in crashed
+    ]  # another machine's rounding, from episode 2 on
+    assert report.parting(base, drifted) == {
+        ("a", 0): "4 (rounding from 2)",
+        ("a", 1): "none in 2 (rounding from 2)",
+    }
     reseeded = [dataclasses.replace(r, seed=7) for r in base]
     assert report.parting(base, reseeded)[("a", 0)] == "other seed"
     assert report.parting(base, crashed[:5])[("a", 1)] == "-"
     text = report.partings_table(["base", "crashed", "slower"], [base, crashed, slower])
     assert text.splitlines()[2:] == [
-        "| arm | run | crashed | slower |", "|---|---:|---:|---:|",
-        "| a | 0 | 4 | none in 5 |", "| a | 1 | none in 2 | none in 3 |"]
+        "| arm | run | crashed | slower |",
+        "|---|---:|---:|---:|",
+        "| a | 0 | 4 | none in 5 |",
+        "| a | 1 | none in 2 | none in 3 |",
+    ]
 
 
 def test_report_writes_summary_table_and_figure(tmp_path: Path) -> None:
@@ -257,8 +297,7 @@ class Sequenced:
 
 
 @pytest.mark.parametrize("update_first", [False, True])
-def test_a_learner_that_updates_first_updates_while_the_shield_answers(
-        update_first: bool) -> None:
+def test_a_learner_that_updates_first_updates_while_the_shield_answers(update_first: bool) -> None:
     """The usual order updates after storing the step; ``update_first`` updates before the
     step is stored, and, given a thread to step the environment in (a remote shield's), both
     at once."""
@@ -266,15 +305,23 @@ def test_a_learner_that_updates_first_updates_while_the_shield_answers(
 
     alone = Sequenced(update_first)
     runner.play(alone, alone, np.zeros(4, np.float32), alone)  # type: ignore[arg-type]
-    expected = ["act", "update", "step", "remember"] if update_first else \
-        ["act", "step", "remember", "update"]
+    expected = (
+        ["act", "update", "step", "remember"]
+        if update_first
+        else ["act", "step", "remember", "update"]
+    )
     assert alone.calls == expected
     assert alone.met == [False, True]  # one after the other: the first waited in vain
     if update_first:
         beside = Sequenced(update_first)
         with ThreadPoolExecutor(1) as pool:
-            runner.play(beside, beside, np.zeros(4, np.float32), beside,  # type: ignore[arg-type]
-                        pool=pool)
+            runner.play(
+                beside,
+                beside,
+                np.zeros(4, np.float32),
+                beside,  # type: ignore[arg-type]
+                pool=pool,
+            )
         assert beside.met == [True, True]  # each saw the other start: they ran together
         assert beside.calls[-1] == "remember"
 
@@ -301,8 +348,9 @@ def test_a_finished_run_keeps_its_shield_model(tmp_path: Path) -> None:
     takes it, with the state count the last episode recorded."""
     arm = "idm-aggressive+shield"
     runner.run_one(CONFIG, arm, 0, tmp_path)
-    kept = json.loads(gzip.decompress(
-        (tmp_path / "models" / "idm-aggressive_shield__run00.json.gz").read_bytes()))
+    kept = json.loads(
+        gzip.decompress((tmp_path / "models" / "idm-aggressive_shield__run00.json.gz").read_bytes())
+    )
     model = Shield.from_snapshot(codec.from_json(kept["exact"]))
     last = records.read(records.path_for(tmp_path, arm, 0))[1][-1]
     assert model.n_states == last.n_states > 0
@@ -316,14 +364,15 @@ def test_a_stopped_run_goes_on_by_replaying(tmp_path: Path) -> None:
     arm = "idm-aggressive+shield"
     runner.run_one(CONFIG, arm, 0, whole)
     asked = iter(range(3))
-    assert runner.run_one(CONFIG, arm, 0, stopped,
-                          stop=lambda: next(asked, None) is None) == 4
-    kept = json.loads(gzip.decompress(
-        (stopped / "models" / "idm-aggressive_shield__run00.json.gz").read_bytes()))
+    assert runner.run_one(CONFIG, arm, 0, stopped, stop=lambda: next(asked, None) is None) == 4
+    kept = json.loads(
+        gzip.decompress((stopped / "models" / "idm-aggressive_shield__run00.json.gz").read_bytes())
+    )
     assert codec.from_json(kept["exact"])["counters"]["episodes"] == 4
     assert runner.run_one(CONFIG, arm, 0, stopped) == CONFIG.episodes - 4
-    assert without_wall(records.read(records.path_for(stopped, arm, 0))[1]) == \
-        without_wall(records.read(records.path_for(whole, arm, 0))[1])
+    assert without_wall(records.read(records.path_for(stopped, arm, 0))[1]) == without_wall(
+        records.read(records.path_for(whole, arm, 0))[1]
+    )
 
 
 def test_a_run_that_does_not_replay_says_what_differs(tmp_path: Path) -> None:
@@ -341,20 +390,31 @@ def test_a_run_that_does_not_replay_says_what_differs(tmp_path: Path) -> None:
         path.write_text("".join(json.dumps(line) + "\n" for line in lines))
 
     write({**runner.versions(), "cpu": "Another CPU (AVX512)"})
-    with pytest.raises(records.RecordError, match=r"episode 2 did not replay identically "
-                       r"\(the hardware differs \(written on Another CPU \(AVX512\), replayed "
-                       r"on .+\): the controller's arithmetic follows the CPU\)"):
+    with pytest.raises(
+        records.RecordError,
+        match=r"episode 2 did not replay identically "
+        r"\(the hardware differs \(written on Another CPU \(AVX512\), replayed "
+        r"on .+\): the controller's arithmetic follows the CPU\)",
+    ):
         runner.run_one(CONFIG, arm, 0, tmp_path)
     write({**runner.versions(), "core": "0" * 12})  # another e-FSM, the same libraries
-    with pytest.raises(records.RecordError, match=r"\(the e-FSM has changed since \(core "
-                       r"000000000000 there, [0-9a-f]{12} here\)\)"):
+    with pytest.raises(
+        records.RecordError,
+        match=r"\(the e-FSM has changed since \(core "
+        r"000000000000 there, [0-9a-f]{12} here\)\)",
+    ):
         runner.run_one(CONFIG, arm, 0, tmp_path)
     write({**runner.versions(), "torch": "1.0", "cpu": "Another CPU"})  # both named
-    with pytest.raises(records.RecordError, match=r"\(the hardware differs \(written on Another "
-                       r"CPU, .+; the libraries differ \(torch 1.0 there, .+ here\)"):
+    with pytest.raises(
+        records.RecordError,
+        match=r"\(the hardware differs \(written on Another "
+        r"CPU, .+; the libraries differ \(torch 1.0 there, .+ here\)",
+    ):
         runner.run_one(CONFIG, arm, 0, tmp_path)
-    for written in (runner.versions(), {name: value for name, value in runner.versions().items()
-                                        if name != "core"}):  # (before headers named it)
+    for written in (
+        runner.versions(),
+        {name: value for name, value in runner.versions().items() if name != "core"},
+    ):  # (before headers named it)
         write(written)
         with pytest.raises(records.RecordError, match="the code has changed since"):
             runner.run_one(CONFIG, arm, 0, tmp_path)
@@ -389,19 +449,25 @@ def test_a_gzipped_run_goes_on_unpacked(tmp_path: Path) -> None:
 def test_the_report_puts_ddpg_arms_beside_the_paper() -> None:
     """The paper's rows come first, then this experiment's in the same columns; other arms
     have no counterpart in the paper."""
-    rows = [dataclasses.replace(record(run, e, "success" if e > 1 else "collision"),
-                                arm="ddpg+shield") for run in (0, 1) for e in (1, 2, 3)]
+    rows = [
+        dataclasses.replace(record(run, e, "success" if e > 1 else "collision"), arm="ddpg+shield")
+        for run in (0, 1)
+        for e in (1, 2, 3)
+    ]
     text = report.paper_table(report.summarise(rows))
     assert text is not None
     lines = text.splitlines()
-    assert lines[2] == ("| paper: DDPG + e-FSM | 10 x 1500 | 14,719 (98.1%) | 76 | 205 | 68 "
-                        "| 2.0460 / 1.7800 |")
+    assert lines[2] == (
+        "| paper: DDPG + e-FSM | 10 x 1500 | 14,719 (98.1%) | 76 | 205 | 68 | 2.0460 / 1.7800 |"
+    )
     assert lines[3] == "| this: ddpg+shield | 2 x 3 | 4 (66.7%) | 0 | 2 | 1 | 1.0000 / 0.0000 |"
     assert report.paper_table(report.summarise([record(0, 1, "success")])) is None
-    both = report.paper_table(report.summarise(rows + [dataclasses.replace(
-        record(0, 1, "success"), arm="ddpg")]))
+    both = report.paper_table(
+        report.summarise(rows + [dataclasses.replace(record(0, 1, "success"), arm="ddpg")])
+    )
     assert both is not None and both.splitlines()[2].startswith(
-        "| paper: DDPG | 10 x 1500 | 12,249 (81.6%) | 1,251 | 1,500 | - |")
+        "| paper: DDPG | 10 x 1500 | 12,249 (81.6%) | 1,251 | 1,500 | - |"
+    )
 
 
 def test_report_of_each_runs_first_episodes(tmp_path: Path) -> None:
@@ -410,7 +476,7 @@ def test_report_of_each_runs_first_episodes(tmp_path: Path) -> None:
     shorter = dataclasses.replace(CONFIG, episodes=5)
     path = records.path_for(tmp_path, "idm-aggressive", 1)
     records.start(path, {"identity": "other run"}, CONFIG.episodes)
-    for r in records.read(records.path_for(tmp_path, "idm-aggressive", 0))[1][:shorter.episodes]:
+    for r in records.read(records.path_for(tmp_path, "idm-aggressive", 0))[1][: shorter.episodes]:
         records.append(path, dataclasses.replace(r, run=1))
     summary = report.write(tmp_path, 5)[1]["idm-aggressive"]
     assert summary["episodes"] == 10 and summary["episodes_per_run"] == [5, 5]
@@ -418,43 +484,55 @@ def test_report_of_each_runs_first_episodes(tmp_path: Path) -> None:
     assert report.write(tmp_path)[1]["idm-aggressive"]["episodes_per_run"] == [8, 5]
     result = cli("report", str(tmp_path), "--episodes", "6")
     assert result.returncode == 2
-    assert "run 1 of idm-aggressive has only 5 episodes; --episodes must be at most 5" \
-        in result.stderr
+    assert (
+        "run 1 of idm-aggressive has only 5 episodes; --episodes must be at most 5" in result.stderr
+    )
     uneven = [record(0, e, "success") for e in range(1, 4)] + [record(1, 1, "success")]
-    with pytest.raises(records.RecordError, match="run 1 of a has only 1 episodes; "
-                       "--episodes must be at most 1"):  # the shortest run, not the first
+    with pytest.raises(
+        records.RecordError, match="run 1 of a has only 1 episodes; --episodes must be at most 1"
+    ):  # the shortest run, not the first
         report.first_episodes(uneven, 4)
     assert report.first_episodes([], 4) == []  # an experiment with no episodes yet
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "client", *args], capture_output=True,
-                          text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "client", *args], capture_output=True, text=True, timeout=120
+    )
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (("run", "--arms", "ddpg,teleport"), "Invalid value for '--arms': unknown arm 'teleport'"),
-    (("run", "--shield", "http://127.0.0.1:{port}", "--episodes", "1"), "unreachable"),
-    (("report", "{tmp}/nothing"), "no record files"),
-    (("run", "--shield-config", '{"reviser": {"inspect": "every"}}'),
-     "Invalid value for '--shield-config': reviser.inspect: expected one of"),
-    (("run", "--shield-config", "{reviser: 1}"),
-     "Invalid value for '--shield-config': not JSON: Expecting property name"),
-    (("run", "--shield-config", "[1]"), "'--shield-config': a JSON object {...}, not list"),
-    (("run", "--reward", '{"penalty": 60}'), "Invalid value for '--reward': "),
-    (("run", "--ddpg", '{"learning_rate": 1}'), "Invalid value for '--ddpg': "),
-    (("run", "--ddpg", '{"gamma": 0.9'), "Invalid value for '--ddpg': not JSON"),
-    (("run", "--runs", "ten"), "Invalid value for '--runs'"),
-    (("run", "--runs", "0"), "Invalid value for '--runs'"),
-    (("run", "--transport", "udp"), "Invalid value for '--transport'"),
-    (("run", "--lead", "mars"), "Invalid value for '--lead'"),
-    (("run", "--episodez", "5"), "No such option: --episodez"),
-    (("runn",), "No such command 'runn'"),
-])
-def test_user_errors_are_one_clear_line(tmp_path: Path, args: tuple[str, ...],
-                                        message: str) -> None:
-    args = tuple(a.replace("{port}", str(free_port())).replace("{tmp}", str(tmp_path))
-                 for a in args)
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("run", "--arms", "ddpg,teleport"), "Invalid value for '--arms': unknown arm 'teleport'"),
+        (("run", "--shield", "http://127.0.0.1:{port}", "--episodes", "1"), "unreachable"),
+        (("report", "{tmp}/nothing"), "no record files"),
+        (
+            ("run", "--shield-config", '{"reviser": {"inspect": "every"}}'),
+            "Invalid value for '--shield-config': reviser.inspect: expected one of",
+        ),
+        (
+            ("run", "--shield-config", "{reviser: 1}"),
+            "Invalid value for '--shield-config': not JSON: Expecting property name",
+        ),
+        (("run", "--shield-config", "[1]"), "'--shield-config': a JSON object {...}, not list"),
+        (("run", "--reward", '{"penalty": 60}'), "Invalid value for '--reward': "),
+        (("run", "--ddpg", '{"learning_rate": 1}'), "Invalid value for '--ddpg': "),
+        (("run", "--ddpg", '{"gamma": 0.9'), "Invalid value for '--ddpg': not JSON"),
+        (("run", "--runs", "ten"), "Invalid value for '--runs'"),
+        (("run", "--runs", "0"), "Invalid value for '--runs'"),
+        (("run", "--transport", "udp"), "Invalid value for '--transport'"),
+        (("run", "--lead", "mars"), "Invalid value for '--lead'"),
+        (("run", "--episodez", "5"), "No such option: --episodez"),
+        (("runn",), "No such command 'runn'"),
+    ],
+)
+def test_user_errors_are_one_clear_line(
+    tmp_path: Path, args: tuple[str, ...], message: str
+) -> None:
+    args = tuple(
+        a.replace("{port}", str(free_port())).replace("{tmp}", str(tmp_path)) for a in args
+    )
     result = cli(*args, "--out", str(tmp_path / "out")) if args[0] == "run" else cli(*args)
     assert result.returncode == 2
     assert message in result.stderr and "Traceback" not in result.stderr
@@ -463,24 +541,50 @@ def test_user_errors_are_one_clear_line(tmp_path: Path, args: tuple[str, ...],
 
 
 def test_the_help_of_run_names_every_option_whole_at_80_columns() -> None:
-    result = subprocess.run([sys.executable, "-m", "client", "run", "--help"],
-                            capture_output=True, text=True, timeout=120,
-                            env={**os.environ, "COLUMNS": "80"})
+    result = subprocess.run(
+        [sys.executable, "-m", "client", "run", "--help"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "COLUMNS": "80"},
+    )
     assert result.returncode == 0, result.stderr
     assert max(len(line) for line in result.stdout.splitlines()) <= 80
-    for option in ("--arms", "--shield-config", "--checkpoint-minutes", "--stop-after",
-                   "--update-first", "--lockstep-runs", "--reward", "--ddpg"):
+    for option in (
+        "--arms",
+        "--shield-config",
+        "--checkpoint-minutes",
+        "--stop-after",
+        "--update-first",
+        "--lockstep-runs",
+        "--reward",
+        "--ddpg",
+    ):
         assert f"  {option} " in result.stdout or f"  {option}\n" in result.stdout
 
 
 def test_a_run_says_first_what_it_will_run_and_how_to_make_it_shorter(tmp_path: Path) -> None:
-    result = cli("run", "--arms", "idm", "--runs", "2", "--episodes", "1", "--lead",
-                 "synthetic", "--workers", "1", "--out", str(tmp_path))
+    result = cli(
+        "run",
+        "--arms",
+        "idm",
+        "--runs",
+        "2",
+        "--episodes",
+        "1",
+        "--lead",
+        "synthetic",
+        "--workers",
+        "1",
+        "--out",
+        str(tmp_path),
+    )
     assert result.returncode == 0, result.stderr
     assert result.stderr.splitlines()[0] == (
         f"running idm: 2 x 1 episodes per arm (2 episodes of up to 800 steps) in 1 worker "
         f"process(es), records into {tmp_path}; shorter: --runs 1 --episodes 20, or "
-        "--stop-after MINUTES (the same command goes on later)")
+        "--stop-after MINUTES (the same command goes on later)"
+    )
 
 
 def test_a_corrupt_record_file_is_one_clear_line(tmp_path: Path) -> None:
@@ -491,27 +595,68 @@ def test_a_corrupt_record_file_is_one_clear_line(tmp_path: Path) -> None:
 
 
 def test_run_command_end_to_end(tmp_path: Path) -> None:
-    result = cli("run", "--arms", "idm,idm+shadow", "--runs", "2", "--episodes", "3",
-                 "--lead", "synthetic", "--workers", "2", "--out", str(tmp_path))
+    result = cli(
+        "run",
+        "--arms",
+        "idm,idm+shadow",
+        "--runs",
+        "2",
+        "--episodes",
+        "3",
+        "--lead",
+        "synthetic",
+        "--workers",
+        "2",
+        "--out",
+        str(tmp_path),
+    )
     assert result.returncode == 0, result.stderr
     assert "| idm+shadow | 2 | 6 |" in result.stdout
     assert len(list((tmp_path / "records").glob("*.jsonl"))) == 4
 
 
 def test_lockstep_command(tmp_path: Path) -> None:
-    result = cli("run", "--arms", "ddpg,idm", "--runs", "3", "--episodes", "2", "--lockstep",
-                 "--lockstep-runs", "2", "--lead", "synthetic", "--workers", "2",
-                 "--out", str(tmp_path))
+    result = cli(
+        "run",
+        "--arms",
+        "ddpg,idm",
+        "--runs",
+        "3",
+        "--episodes",
+        "2",
+        "--lockstep",
+        "--lockstep-runs",
+        "2",
+        "--lead",
+        "synthetic",
+        "--workers",
+        "2",
+        "--out",
+        str(tmp_path),
+    )
     assert result.returncode == 0, result.stderr
     assert "| ddpg | 3 | 6 |" in result.stdout and "| idm | 3 | 6 |" in result.stdout
 
 
 def test_the_run_command_can_have_ddpg_update_first(tmp_path: Path) -> None:
-    result = cli("run", "--arms", "ddpg", "--runs", "1", "--episodes", "1", "--lead",
-                 "synthetic", "--update-first", "--out", str(tmp_path))
+    result = cli(
+        "run",
+        "--arms",
+        "ddpg",
+        "--runs",
+        "1",
+        "--episodes",
+        "1",
+        "--lead",
+        "synthetic",
+        "--update-first",
+        "--out",
+        str(tmp_path),
+    )
     assert result.returncode == 0, result.stderr
-    header = json.loads((tmp_path / "records" / "ddpg__run00.jsonl").read_text()
-                        .splitlines()[0])["header"]
+    header = json.loads((tmp_path / "records" / "ddpg__run00.jsonl").read_text().splitlines()[0])[
+        "header"
+    ]
     assert header["config"]["ddpg"] == {"update_first": True}
 
 
@@ -520,41 +665,72 @@ def test_the_demo_trains_both_arms_in_lockstep_against_its_own_service(tmp_path:
     assert result.returncode == 0, result.stderr
     assert "| ddpg | 2 | 4 |" in result.stdout and "| ddpg+shield | 2 | 4 |" in result.stdout
     assert (tmp_path / "figure.png").exists()
-    headers = [json.loads(path.read_text().splitlines()[0])["header"]
-               for path in (tmp_path / "records").glob("*.jsonl")]
+    headers = [
+        json.loads(path.read_text().splitlines()[0])["header"]
+        for path in (tmp_path / "records").glob("*.jsonl")
+    ]
     assert len(headers) == 4
     assert all(h["learning"]["lockstep"] for h in headers)
     assert all(h["config"]["shield"].startswith("http://127.0.0.1:") for h in headers)
     assert not list(tmp_path.glob("tmp*"))  # the service's data went with the service
     again = cli("demo", "--runs", "2", "--episodes", "2", "--out", str(tmp_path))
     assert again.returncode == 0, again.stderr
-    assert (f"{tmp_path} already holds 8 of 8 episodes: reporting them without training; to "
-            f"start afresh, remove {tmp_path}") in again.stdout
+    assert (
+        f"{tmp_path} already holds 8 of 8 episodes: reporting them without training; to "
+        f"start afresh, remove {tmp_path}"
+    ) in again.stdout
     assert "| ddpg+shield | 2 | 4 |" in again.stdout
 
 
 def test_the_command_stops_runs_outside_lockstep_at_its_deadline(tmp_path: Path) -> None:
-    command = ("run", "--arms", "idm", "--runs", "2", "--episodes", "30", "--lead",
-               "synthetic", "--workers", "1", "--out", str(tmp_path))
+    command = (
+        "run",
+        "--arms",
+        "idm",
+        "--runs",
+        "2",
+        "--episodes",
+        "30",
+        "--lead",
+        "synthetic",
+        "--workers",
+        "1",
+        "--out",
+        str(tmp_path),
+    )
     first = cli(*command, "--stop-after", "0")
     assert first.returncode == 0, first.stderr
-    assert "stopped at the deadline with 2 of 60 episodes; the same command goes on" \
-        in first.stdout
+    assert "stopped at the deadline with 2 of 60 episodes; the same command goes on" in first.stdout
     assert not (tmp_path / "table.md").exists()
     then = cli(*command)
     assert then.returncode == 0, then.stderr
     assert "| idm | 2 | 60 |" in then.stdout
 
 
-@pytest.mark.parametrize(("options", "message"), [
-    (["--lockstep-runs", "2"], "options of --lockstep"),
-    (["--device", "cuda"], "options of --lockstep"),
-    (["--checkpoint-minutes", "5"], "options of --lockstep"),
-    (["--lockstep", "--device", "tpu"], "cpu or cuda"),
-])
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--lockstep-runs", "2"], "options of --lockstep"),
+        (["--device", "cuda"], "options of --lockstep"),
+        (["--checkpoint-minutes", "5"], "options of --lockstep"),
+        (["--lockstep", "--device", "tpu"], "cpu or cuda"),
+    ],
+)
 def test_lockstep_options_are_checked(tmp_path: Path, options: list[str], message: str) -> None:
-    result = cli("run", "--arms", "ddpg", "--runs", "1", "--episodes", "1", "--lead",
-                 "synthetic", "--out", str(tmp_path), *options)
+    result = cli(
+        "run",
+        "--arms",
+        "ddpg",
+        "--runs",
+        "1",
+        "--episodes",
+        "1",
+        "--lead",
+        "synthetic",
+        "--out",
+        str(tmp_path),
+        *options,
+    )
     assert result.returncode == 2 and message in result.stderr
     assert not (tmp_path / "records").exists()
 
@@ -562,22 +738,43 @@ def test_lockstep_options_are_checked(tmp_path: Path, options: list[str], messag
 def test_compare_puts_experiments_side_by_side(tmp_path: Path) -> None:
     """One row per directory and arm, each shielded row naming its configuration."""
     for name, overrides in (("default", "{}"), ("overwrite", '{"reviser":{"flags":"overwrite"}}')):
-        result = cli("run", "--arms", "idm-aggressive,idm-aggressive+shield", "--runs", "1",
-                     "--episodes", "2", "--lead", "synthetic", "--shield-config", overrides,
-                     "--out", str(tmp_path / name))
+        result = cli(
+            "run",
+            "--arms",
+            "idm-aggressive,idm-aggressive+shield",
+            "--runs",
+            "1",
+            "--episodes",
+            "2",
+            "--lead",
+            "synthetic",
+            "--shield-config",
+            overrides,
+            "--out",
+            str(tmp_path / name),
+        )
         assert result.returncode == 0, result.stderr
-    result = cli("compare", str(tmp_path / "default"), str(tmp_path / "overwrite"),
-                 "--out", str(tmp_path / "table.md"))
+    result = cli(
+        "compare",
+        str(tmp_path / "default"),
+        str(tmp_path / "overwrite"),
+        "--out",
+        str(tmp_path / "table.md"),
+    )
     assert result.returncode == 0, result.stderr
     rows = [line for line in result.stdout.splitlines() if line.startswith("| ")][1:]
     assert [row.split(" | ")[0] for row in rows] == [
-        "| default: idm-aggressive", "| default: idm-aggressive+shield",
-        "| overwrite: idm-aggressive", "| overwrite: idm-aggressive+shield"]
+        "| default: idm-aggressive",
+        "| default: idm-aggressive+shield",
+        "| overwrite: idm-aggressive",
+        "| overwrite: idm-aggressive+shield",
+    ]
     assert rows[3].endswith('`{"reviser":{"flags":"overwrite"}}` |')
     assert rows[0].endswith(" - |")
     assert (tmp_path / "table.md").read_text() == result.stdout
-    first = cli("compare", str(tmp_path / "default"), str(tmp_path / "overwrite"),
-                "--episodes", "1")
+    first = cli(
+        "compare", str(tmp_path / "default"), str(tmp_path / "overwrite"), "--episodes", "1"
+    )
     assert first.returncode == 0, first.stderr
     counts = [row.split(" | ")[1:3] for row in first.stdout.splitlines() if ": idm" in row]
     assert counts == [["1", "1"]] * 4  # runs, episodes: each run's first episode only
@@ -623,8 +820,11 @@ def alive(pid: int) -> bool:
 def children(pid: int) -> list[int]:
     """The live (not zombie) processes whose parent is ``pid``."""
     pids = (int(entry.name) for entry in Path("/proc").iterdir() if entry.name.isdigit())
-    return [child for child in pids
-            if (state := process_state(child)) and state[0] != "Z" and state[1] == pid]
+    return [
+        child
+        for child in pids
+        if (state := process_state(child)) and state[0] != "Z" and state[1] == pid
+    ]
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="the workers' parent-death signal is Linux's")
@@ -632,9 +832,27 @@ def test_workers_end_with_a_killed_runner(tmp_path: Path) -> None:
     """kill -9 of `client run` leaves no worker appending to its records, and no process of
     its own (workers, the progress queue's manager) behind."""
     process = subprocess.Popen(
-        [sys.executable, "-m", "client", "run", "--arms", "idm", "--runs", "2", "--episodes",
-         "2000", "--lead", "synthetic", "--workers", "2", "--out", str(tmp_path)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        [
+            sys.executable,
+            "-m",
+            "client",
+            "run",
+            "--arms",
+            "idm",
+            "--runs",
+            "2",
+            "--episodes",
+            "2000",
+            "--lead",
+            "synthetic",
+            "--workers",
+            "2",
+            "--out",
+            str(tmp_path),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     files = [records.path_for(tmp_path, "idm", run) for run in (0, 1)]
 
     def lines() -> list[int]:
@@ -658,13 +876,29 @@ def test_workers_end_with_a_killed_runner(tmp_path: Path) -> None:
 @pytest.mark.skipif(sys.platform != "linux", reason="the parent-death signal is Linux's")
 def test_the_demo_service_ends_with_a_killed_demo(tmp_path: Path) -> None:
     process = subprocess.Popen(
-        [sys.executable, "-m", "client", "demo", "--runs", "1", "--episodes", "2000",
-         "--out", str(tmp_path)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        [
+            sys.executable,
+            "-m",
+            "client",
+            "demo",
+            "--runs",
+            "1",
+            "--episodes",
+            "2000",
+            "--out",
+            str(tmp_path),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     deadline = time.monotonic() + 60
     while not list(tmp_path.glob("records/*.jsonl")) and time.monotonic() < deadline:
         time.sleep(0.1)
-    services = [pid for pid in children(process.pid)
-                if b"app\0serve" in Path(f"/proc/{pid}/cmdline").read_bytes()]
+    services = [
+        pid
+        for pid in children(process.pid)
+        if b"app\0serve" in Path(f"/proc/{pid}/cmdline").read_bytes()
+    ]
     assert len(services) == 1, "the demo did not start its service"
     process.kill()
     process.wait()
@@ -697,16 +931,24 @@ def test_an_unreachable_shield_releases_the_run(tmp_path: Path) -> None:
 
 
 def test_the_paper_protocol_script_runs_every_shielded_run_on_its_own_service(
-        tmp_path: Path) -> None:
+    tmp_path: Path,
+) -> None:
     """results/scripts/paper-protocol.sh at a toy size: its services start, each shielded run
     gets one, the report is written and the services are gone afterwards."""
     root = Path(__file__).resolve().parents[2]
     port = free_port()
-    env = {**os.environ, "RUNS": "2", "EPISODES": "2", "PORT": str(port),
-           "PYTHON": sys.executable, "LOG_LEVEL": "info"}  # info: every request logged
+    env = {
+        **os.environ,
+        "RUNS": "2",
+        "EPISODES": "2",
+        "PORT": str(port),
+        "PYTHON": sys.executable,
+        "LOG_LEVEL": "info",
+    }  # info: every request logged
     script = root / "results/scripts/paper-protocol.sh"
-    result = subprocess.run(["bash", str(script), str(tmp_path)],
-                            env=env, capture_output=True, text=True, timeout=300)
+    result = subprocess.run(
+        ["bash", str(script), str(tmp_path)], env=env, capture_output=True, text=True, timeout=300
+    )
     assert result.returncode == 0, result.stderr
     headers, episodes = records.read_all(tmp_path)
     shields = {h["config"]["shield"] for h in headers}
@@ -723,25 +965,38 @@ def test_the_paper_protocol_script_runs_every_shielded_run_on_its_own_service(
 
 
 def test_the_paper_protocol_script_trains_in_lockstep_groups_against_batch_services(
-        tmp_path: Path) -> None:
+    tmp_path: Path,
+) -> None:
     """LOCKSTEP=1 TRANSPORT=batch SERVICES=2 SHIELD_CONFIG: the shielded runs' models spread
     over two services with the overrides, the arms train in lockstep groups of their own
     sizes, and machine.txt says so."""
     root = Path(__file__).resolve().parents[2]
     port = free_port()
-    env = {**os.environ, "RUNS": "3", "EPISODES": "2", "PORT": str(port),
-           "PYTHON": sys.executable, "LOCKSTEP": "1", "GROUP": "2", "DDPG_GROUP": "3",
-           "TRANSPORT": "batch", "SERVICES": "2", "LOG_LEVEL": "info",
-           "SHIELD_CONFIG": '{"reviser": {"flags": "overwrite"}}'}
+    env = {
+        **os.environ,
+        "RUNS": "3",
+        "EPISODES": "2",
+        "PORT": str(port),
+        "PYTHON": sys.executable,
+        "LOCKSTEP": "1",
+        "GROUP": "2",
+        "DDPG_GROUP": "3",
+        "TRANSPORT": "batch",
+        "SERVICES": "2",
+        "LOG_LEVEL": "info",
+        "SHIELD_CONFIG": '{"reviser": {"flags": "overwrite"}}',
+    }
     script = root / "results/scripts/paper-protocol.sh"
-    result = subprocess.run(["bash", str(script), str(tmp_path)],
-                            env=env, capture_output=True, text=True, timeout=300)
+    result = subprocess.run(
+        ["bash", str(script), str(tmp_path)], env=env, capture_output=True, text=True, timeout=300
+    )
     assert result.returncode == 0, result.stderr
     headers, episodes = records.read_all(tmp_path)
     assert all(h["config"]["shield_config"] == {"reviser": {"flags": "overwrite"}} for h in headers)
     assert {h["shield"]["reviser"]["flags"] for h in headers if h["shield"]} == {"overwrite"}
     assert {h["config"]["shield"] for h in headers} == {
-        f"http://127.0.0.1:{port},http://127.0.0.1:{port + 1}"}
+        f"http://127.0.0.1:{port},http://127.0.0.1:{port + 1}"
+    }
     assert {h["config"]["transport"] for h in headers} == {"batch"}
     assert all(h["learning"] == {"lockstep": True, "device": "cpu"} for h in headers)
     assert len(episodes) == 2 * 3 * 2
@@ -761,8 +1016,9 @@ def test_the_paper_protocol_script_refuses_an_unknown_transport(tmp_path: Path) 
     root = Path(__file__).resolve().parents[2]
     env = {**os.environ, "PYTHON": sys.executable, "TRANSPORT": "http"}
     script = root / "results/scripts/paper-protocol.sh"
-    result = subprocess.run(["bash", str(script), str(tmp_path)],
-                            env=env, capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        ["bash", str(script), str(tmp_path)], env=env, capture_output=True, text=True, timeout=60
+    )
     assert result.returncode == 2
     assert result.stderr.strip() == "TRANSPORT: ws or batch, not http"
 
@@ -776,8 +1032,7 @@ def test_a_traced_run_keeps_every_decision_once_even_when_resumed(tmp_path: Path
     rows = trace.read(trace.path_for(tmp_path, arm, 0))
     episodes = records.read(records.path_for(tmp_path, arm, 0))[1]
     assert len(rows) == sum(e.steps for e in episodes)  # no replayed step twice
-    assert [sum(r["e"] == e.episode for r in rows) for e in episodes] == [
-        e.steps for e in episodes]
+    assert [sum(r["e"] == e.episode for r in rows) for e in episodes] == [e.steps for e in episodes]
     revised = [r for r in rows if r["r"].startswith("revised")]
     assert revised and len(revised) == sum(sum(e.interventions.values()) for e in episodes)
     assert {r["r"] for r in rows if r["e"] <= 2} <= {"inactive", "cold_start"}  # not active yet
@@ -786,10 +1041,23 @@ def test_a_traced_run_keeps_every_decision_once_even_when_resumed(tmp_path: Path
 
 
 def test_the_trace_command_tells_where_the_shield_revised(tmp_path: Path) -> None:
-    result = cli("run", "--arms", "ddpg+shield", "--runs", "1", "--episodes", "3",
-                 "--lead", "synthetic", "--out", str(tmp_path), "--trace", "--lockstep",
-                 "--shield-config", '{"reviser": {"activate_after_episodes": 1, '
-                                    '"flag_min_rate": 0.0001}}')
+    result = cli(
+        "run",
+        "--arms",
+        "ddpg+shield",
+        "--runs",
+        "1",
+        "--episodes",
+        "3",
+        "--lead",
+        "synthetic",
+        "--out",
+        str(tmp_path),
+        "--trace",
+        "--lockstep",
+        "--shield-config",
+        '{"reviser": {"activate_after_episodes": 1, "flag_min_rate": 0.0001}}',
+    )
     assert result.returncode == 0, result.stderr
     rows = trace.read(trace.path_for(tmp_path, "ddpg+shield", 0))
     assert len(rows) == sum(e.steps for e in records.read_all(tmp_path)[1])
@@ -803,13 +1071,18 @@ def test_the_trace_command_tells_where_the_shield_revised(tmp_path: Path) -> Non
     assert header[0] == "episodes" and by_reason[2].startswith("| 1-50 |")
     assert sum(counts) == len(rows)  # every traced decision counted once
     origins = result.stdout.split("Where the failures came from")[1].split("\n\n")[1]
-    failed = sum(int(c) for line in origins.splitlines()[2:]
-                 for c in line.strip("|").split("|")[3:5])
+    failed = sum(
+        int(c) for line in origins.splitlines()[2:] for c in line.strip("|").split("|")[3:5]
+    )
     assert failed == sum(e.outcome != "success" for e in records.read_all(tmp_path)[1]) > 0
     sizes = result.stdout.split("How far the revisions moved the action")[1].split("\n\n")[1]
-    overall = {cells[0]: (int(cells[2]), float(cells[3])) for cells in (
-        [c.strip() for c in line.strip("|").split("|")] for line in sizes.splitlines()[2:])
-        if cells[1] == "every step"}
+    overall = {
+        cells[0]: (int(cells[2]), float(cells[3]))
+        for cells in (
+            [c.strip() for c in line.strip("|").split("|")] for line in sizes.splitlines()[2:]
+        )
+        if cells[1] == "every step"
+    }
     for criterion in ("collision", "large_distance"):  # counted by the proposal's verdict
         revised = [r for r in rows if r["v"] == criterion and r["r"].startswith("revised")]
         if revised:
@@ -830,8 +1103,12 @@ def test_the_trace_command_tells_where_the_shield_revised(tmp_path: Path) -> Non
 def test_compare_keeps_experiments_of_the_same_name_apart(tmp_path: Path) -> None:
     short = dataclasses.replace(CONFIG, episodes=2)
     for seed in (3, 4):
-        runner.run_one(dataclasses.replace(short, seed=seed), "idm-aggressive", 0,
-                       tmp_path / f"seed-{seed}" / "idm")
+        runner.run_one(
+            dataclasses.replace(short, seed=seed),
+            "idm-aggressive",
+            0,
+            tmp_path / f"seed-{seed}" / "idm",
+        )
     text = report.compare([tmp_path / "seed-3" / "idm", tmp_path / "seed-4" / "idm"])
     rows = [line.split(" | ")[0] for line in text.splitlines()[2:]]
     assert rows == ["| seed-3/idm: idm-aggressive", "| seed-4/idm: idm-aggressive"]
@@ -841,12 +1118,16 @@ def test_compare_keeps_experiments_of_the_same_name_apart(tmp_path: Path) -> Non
 
 def test_the_experiment_entry_point_lists_and_refuses_an_unknown_name() -> None:
     root = Path(__file__).resolve().parents[2]
-    listed = subprocess.run(["bash", str(root / "scripts/experiment")], capture_output=True,
-                            text=True, timeout=30)
+    listed = subprocess.run(
+        ["bash", str(root / "scripts/experiment")], capture_output=True, text=True, timeout=30
+    )
     assert listed.returncode == 0
     names = [line.split()[0] for line in listed.stdout.splitlines()]
     assert "paper-protocol" in names and "default-switch" in names
-    unknown = subprocess.run(["bash", str(root / "scripts/experiment"), "no-such"],
-                             capture_output=True, text=True, timeout=30)
+    unknown = subprocess.run(
+        ["bash", str(root / "scripts/experiment"), "no-such"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert unknown.returncode == 2 and "scripts/experiment lists them" in unknown.stderr
-

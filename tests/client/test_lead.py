@@ -8,9 +8,11 @@ import pytest
 from client.sim import lead
 
 
-@pytest.mark.parametrize("profiles", [lead.cmap("train"), lead.cmap("evaluation"), lead.epa(),
-                                      lead.synthetic(3, hard_braking=True)],
-                         ids=["cmap-train", "cmap-evaluation", "epa", "synthetic"])
+@pytest.mark.parametrize(
+    "profiles",
+    [lead.cmap("train"), lead.cmap("evaluation"), lead.epa(), lead.synthetic(3, hard_braking=True)],
+    ids=["cmap-train", "cmap-evaluation", "epa", "synthetic"],
+)
 def test_windows_hold_the_invariants(profiles: lead.LeadProfiles) -> None:
     rng = np.random.default_rng(0)
     for _ in range(200):
@@ -77,10 +79,10 @@ def test_trip_rebuilding_follows_the_gap_rules() -> None:
     [trip] = build.rebuild_trips(timestep, mph)
     assert len(trip) == 251 + 99
     # a 4 s gap while moving is interpolated
-    [trip] = build.rebuild_trips(np.array([1, *ones[:150], 4, *ones[:100]]),
-                                 np.array([10.0] * 151 + [14.0] * 101))
+    [trip] = build.rebuild_trips(
+        np.array([1, *ones[:150], 4, *ones[:100]]), np.array([10.0] * 151 + [14.0] * 101)
+    )
     assert trip[151:154].tolist() == [11.0, 12.0, 13.0]
     # a 30 s gap while moving splits the trip; the short piece is dropped
-    trips = build.rebuild_trips(np.array([1, *ones[:239], 30, *ones[:50]]),
-                                np.array([10.0] * 291))
+    trips = build.rebuild_trips(np.array([1, *ones[:239], 30, *ones[:50]]), np.array([10.0] * 291))
     assert [len(t) for t in trips] == [240]

@@ -35,9 +35,24 @@ def serve(data: Path, port: int, delay: float = 0.0) -> subprocess.Popen[bytes]:
     """``python -m app serve`` on ``port``, started after ``delay`` seconds."""
     time.sleep(delay)
     return subprocess.Popen(
-        [sys.executable, "-m", "app", "serve", "--host", "127.0.0.1", "--port", str(port),
-         "--data-dir", str(data), "--fsync", "always"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=dict(os.environ))
+        [
+            sys.executable,
+            "-m",
+            "app",
+            "serve",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--data-dir",
+            str(data),
+            "--fsync",
+            "always",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=dict(os.environ),
+    )
 
 
 def later(data: Path, port: int, started: list[subprocess.Popen[bytes]]) -> threading.Thread:
@@ -47,13 +62,13 @@ def later(data: Path, port: int, started: list[subprocess.Popen[bytes]]) -> thre
 
 
 def version(url: str) -> int:
-    result: int = httpx.get(url + "/models/default", params={"tpm": "none"}).json()[
-        "model_version"]
+    result: int = httpx.get(url + "/models/default", params={"tpm": "none"}).json()["model_version"]
     return result
 
 
 def test_each_client_sends_again_until_answered_and_the_step_is_applied_once(
-        tmp_path: Path) -> None:
+    tmp_path: Path,
+) -> None:
     port, data = free_port(), tmp_path / "data"
     url = f"http://127.0.0.1:{port}"
     started: list[subprocess.Popen[bytes]] = []

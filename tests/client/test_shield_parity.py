@@ -28,15 +28,17 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
 
 
 def episodes(shield: StepShield, count: int = 10) -> list[tuple[Any, ...]]:
-    env = ShieldWrapper(CarFollowingEnv(lead=lead.synthetic(2, hard_braking=True)), shield,
-                        stream="car-1")
+    env = ShieldWrapper(
+        CarFollowingEnv(lead=lead.synthetic(2, hard_braking=True)), shield, stream="car-1"
+    )
     controller = PRESETS["aggressive"]
     records: list[tuple[Any, ...]] = []
     obs, _ = env.reset(seed=5)
     for _ in range(count):
         for _ in range(800):
             obs, reward, terminated, truncated, info = env.step(
-                np.array([controller.act(obs)], np.float32))
+                np.array([controller.act(obs)], np.float32)
+            )
             records.append((info["shield"], obs.tolist(), reward))
             if terminated or truncated:
                 records.append((info["shield_done"], info["event"]))
@@ -88,17 +90,24 @@ def test_runner_records_are_identical_in_process_and_over_the_network(
     from client.experiment import records, runner
 
     config = runner.ExperimentConfig(
-        arms=("idm-aggressive+shield",), runs=1, episodes=5, seed=21, lead="synthetic",
+        arms=("idm-aggressive+shield",),
+        runs=1,
+        episodes=5,
+        seed=21,
+        lead="synthetic",
         shield_config={"reviser": {"activate_after_episodes": 1}},
-        model_prefix=f"runner-{transport}")
+        model_prefix=f"runner-{transport}",
+    )
     local_dir, remote_dir = tmp_path_factory.mktemp("local"), tmp_path_factory.mktemp("remote")
     runner.run_one(config, config.arms[0], 0, local_dir)
     remote = dataclasses.replace(config, shield=server.url, transport=transport)  # type: ignore[arg-type]
     runner.run_one(remote, config.arms[0], 0, remote_dir)
 
     def episodes(directory: Path) -> list[object]:
-        return [dataclasses.replace(r, wall_s=0.0)
-                for r in records.read(records.path_for(directory, config.arms[0], 0))[1]]
+        return [
+            dataclasses.replace(r, wall_s=0.0)
+            for r in records.read(records.path_for(directory, config.arms[0], 0))[1]
+        ]
 
     assert episodes(local_dir) == episodes(remote_dir)
     assert sum(sum(r.interventions.values()) for r in episodes(local_dir)) > 0  # type: ignore[attr-defined]
@@ -115,15 +124,23 @@ def test_ddpg_that_updates_first_records_the_same_in_process_and_over_the_networ
     from client.experiment import records, runner
 
     config = runner.ExperimentConfig(
-        arms=("ddpg+shield",), runs=1, episodes=3, seed=23, lead="synthetic",
+        arms=("ddpg+shield",),
+        runs=1,
+        episodes=3,
+        seed=23,
+        lead="synthetic",
         ddpg={"warmup": 64, "update_first": True},
-        shield_config={"reviser": {"activate_after_episodes": 1}}, model_prefix="first")
+        shield_config={"reviser": {"activate_after_episodes": 1}},
+        model_prefix="first",
+    )
 
     def episodes(config: runner.ExperimentConfig) -> list[object]:
         out = tmp_path_factory.mktemp(config.transport)
         runner.run_one(config, config.arms[0], 0, out)
-        return [dataclasses.replace(r, wall_s=0.0)
-                for r in records.read(records.path_for(out, config.arms[0], 0))[1]]
+        return [
+            dataclasses.replace(r, wall_s=0.0)
+            for r in records.read(records.path_for(out, config.arms[0], 0))[1]
+        ]
 
     local = episodes(config)
     for transport in ("http", "ws", "batch"):
@@ -144,8 +161,14 @@ def test_runs_spread_over_sidecars_keep_their_records(
     from client.experiment import records, runner
 
     config = runner.ExperimentConfig(
-        arms=("idm-aggressive+shield",), runs=2, episodes=3, seed=22, lead="synthetic",
-        shield_config={"reviser": {"activate_after_episodes": 1}}, model_prefix="sidecar")
+        arms=("idm-aggressive+shield",),
+        runs=2,
+        episodes=3,
+        seed=22,
+        lead="synthetic",
+        shield_config={"reviser": {"activate_after_episodes": 1}},
+        model_prefix="sidecar",
+    )
     sidecar = start_server(tmp_path_factory.mktemp("sidecar") / "data", "--fsync", "never")
     try:
         remote = dataclasses.replace(config, shield=f"{server.url}, {sidecar.url}")
@@ -163,9 +186,12 @@ def test_runs_spread_over_sidecars_keep_their_records(
 
     for run in (0, 1):
         local, remote_records = (
-            [dataclasses.replace(r, wall_s=0.0)
-             for r in records.read(records.path_for(d, config.arms[0], run))[1]]
-            for d in (local_dir, remote_dir))
+            [
+                dataclasses.replace(r, wall_s=0.0)
+                for r in records.read(records.path_for(d, config.arms[0], run))[1]
+            ]
+            for d in (local_dir, remote_dir)
+        )
         assert local == remote_records
 
 
@@ -190,12 +216,18 @@ def test_lockstep_over_the_batch_route_across_services(
     sidecar = start_server(tmp_path_factory.mktemp("lockstep") / "data", "--fsync", "never")
     try:
         config = runner.ExperimentConfig(
-            arms=("ddpg+shield",), runs=3, episodes=2, seed=23, lead="synthetic",
+            arms=("ddpg+shield",),
+            runs=3,
+            episodes=2,
+            seed=23,
+            lead="synthetic",
             # the paper's reviser acts from the second episode, failures or not
             shield_config={"reviser": {"method": "paper", "activate_after_episodes": 1}},
-            model_prefix="lockstep-sidecar")
-        remote = dataclasses.replace(config, shield=f"{server.url},{sidecar.url}",
-                                     transport="batch")
+            model_prefix="lockstep-sidecar",
+        )
+        remote = dataclasses.replace(
+            config, shield=f"{server.url},{sidecar.url}", transport="batch"
+        )
         local_dir = tmp_path_factory.mktemp("lockstep-local")
         remote_dir = tmp_path_factory.mktemp("lockstep-remote")
         run_lockstep(config, config.arms[0], local_dir)
@@ -212,9 +244,13 @@ def test_lockstep_over_the_batch_route_across_services(
         sidecar.stop()
     for run in range(3):
         local, remote_records = (
-            [dataclasses.replace(r, wall_s=0.0)
-             for r in records.read(records.path_for(d, config.arms[0], run))[1]]
-            for d in (local_dir, remote_dir))
+            [
+                dataclasses.replace(r, wall_s=0.0)
+                for r in records.read(records.path_for(d, config.arms[0], run))[1]
+            ]
+            for d in (local_dir, remote_dir)
+        )
         assert local == remote_records
-    assert any(r.interventions for r in records.read(
-        records.path_for(remote_dir, config.arms[0], 0))[1])  # the shield acted
+    assert any(
+        r.interventions for r in records.read(records.path_for(remote_dir, config.arms[0], 0))[1]
+    )  # the shield acted

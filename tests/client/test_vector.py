@@ -77,8 +77,7 @@ def test_evaluation_learns_nothing_and_the_seed_seeds_the_shield() -> None:
         envs = ShieldVectorWrapper(ledges(2), config=ledge_config())
         envs.reset(seed=11)
         rng = np.random.default_rng(2)
-        runs.append([envs.step(pushes(rng, 2))[4]["applied_action"].tolist()
-                     for _ in range(300)])
+        runs.append([envs.step(pushes(rng, 2))[4]["applied_action"].tolist() for _ in range(300)])
         envs.set_evaluation(True)
         before = envs.shield.shield.snapshot()
         for _ in range(50):
@@ -89,8 +88,11 @@ def test_evaluation_learns_nothing_and_the_seed_seeds_the_shield() -> None:
 
 
 def test_copies_in_worker_processes_share_the_model_in_this_one() -> None:
-    envs = ShieldVectorWrapper(AsyncVectorEnv([lambda: Ledge() for _ in range(2)]),
-                               config=ledge_config(), failure=lambda o, r, t, c, i: i["event"])
+    envs = ShieldVectorWrapper(
+        AsyncVectorEnv([lambda: Ledge() for _ in range(2)]),
+        config=ledge_config(),
+        failure=lambda o, r, t, c, i: i["event"],
+    )
     envs.reset(seed=4)
     rng = np.random.default_rng(4)
     for _ in range(100):

@@ -33,8 +33,9 @@ EDGE = {"edge": "decrease"}  # pushing less is safer
 
 def ledge_config(criteria: dict[str, str] = EDGE) -> ShieldConfig:
     """The shield for :class:`Ledge`, revising from its sixth episode."""
-    return config_for(Ledge(), criteria,
-                      base=ShieldConfig(reviser=ReviserConfig(activate_after_episodes=5)))
+    return config_for(
+        Ledge(), criteria, base=ShieldConfig(reviser=ReviserConfig(activate_after_episodes=5))
+    )
 
 
 class Ledge(gym.Env[np.ndarray, np.ndarray]):
@@ -43,8 +44,9 @@ class Ledge(gym.Env[np.ndarray, np.ndarray]):
     where ``info`` tells the failure (highway-env says ``"crashed"``); ``bounded=False``
     declares the observation space ``Box(-inf, inf)``, as highway-env does."""
 
-    def __init__(self, bumps: bool = False, dims: int = 1, key: str = "event",
-                 bounded: bool = True) -> None:
+    def __init__(
+        self, bumps: bool = False, dims: int = 1, key: str = "event", bounded: bool = True
+    ) -> None:
         low, high = (0.0, 1.0) if bounded else (-np.inf, np.inf)
         self.observation_space = gym.spaces.Box(low, high, shape=(1,), dtype=np.float64)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(dims,), dtype=np.float32)
@@ -52,8 +54,9 @@ class Ledge(gym.Env[np.ndarray, np.ndarray]):
         self.key = key
         self.x, self.t = 0.5, 0
 
-    def reset(self, *, seed: int | None = None,
-              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         self.x, self.t = float(self.np_random.uniform(0.3, 0.6)), 0
         return np.array([self.x]), {}
@@ -75,7 +78,8 @@ def pushing(episodes: int, env: gym.Env[Any, Any], seed: int = 0) -> list[dict[s
         env.reset(seed=seed * 1000 + episode)
         while True:
             _, _, terminated, truncated, info = env.step(
-                np.array([rng.uniform(-0.5, 1.0)], np.float32))
+                np.array([rng.uniform(-0.5, 1.0)], np.float32)
+            )
             infos.append(info)
             if terminated or truncated:
                 break
@@ -90,8 +94,7 @@ def test_the_shield_wrapper_learns_a_ledge_and_keeps_the_point_on_it() -> None:
     revised = [i for i in infos if i["shield"]["revised"]]
     assert revised and all(i["applied_action"][0] < i["proposed_action"] for i in revised)
     json.dumps(infos[-1]["shield"]), json.dumps(infos[-1]["shield_done"])  # JSON-able
-    assert all(float(i["applied_action"][0]) == pytest.approx(i["shield"]["action"])
-               for i in infos)
+    assert all(float(i["applied_action"][0]) == pytest.approx(i["shield"]["action"]) for i in infos)
 
 
 def test_several_action_dimensions_are_refused_at_construction() -> None:
@@ -109,13 +112,14 @@ def test_config_for_reads_the_spaces_and_asks_for_what_they_cannot_say() -> None
     assert config.observation.low == (-1.0, -1.0, -8.0)
     assert (config.action.low, config.action.high, config.action.n_bins) == (-2.0, 2.0, 20)
     assert [c.name for c in config.criteria] == ["overspeed_cw", "overspeed_ccw"]
-    bounded = config_for(pendulum, {"overspeed_cw": ("increase", Bound("x2", below=-6.0)),
-                                    "overspeed_ccw": "decrease"})
+    bounded = config_for(
+        pendulum,
+        {"overspeed_cw": ("increase", Bound("x2", below=-6.0)), "overspeed_ccw": "decrease"},
+    )
     assert [c.bound for c in bounded.criteria] == [Bound("x2", below=-6.0), None]
     # a failure whose saving direction depends on the state: none declared, with or without
     # a bound
-    either = config_for(pendulum, {"overspeed": None,
-                                   "still": (None, Bound("x2", below=-7.0))})
+    either = config_for(pendulum, {"overspeed": None, "still": (None, Bound("x2", below=-7.0))})
     assert [c.direction for c in either.criteria] == [None, None]
     assert either.criteria[1].bound == Bound("x2", below=-7.0)
     with pytest.raises(InvalidConfig) as refused:
@@ -125,8 +129,10 @@ def test_config_for_reads_the_spaces_and_asks_for_what_they_cannot_say() -> None
     unbounded.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(2,))
     with pytest.raises(SpaceMismatch, match="leaves all 2 of its numbers unbounded"):
         config_for(unbounded, EDGE)
-    assert config_for(unbounded, EDGE, low=[-1.2, -0.07], high=[0.6, 0.07]).observation.high \
-        == (0.6, 0.07)
+    assert config_for(unbounded, EDGE, low=[-1.2, -0.07], high=[0.6, 0.07]).observation.high == (
+        0.6,
+        0.07,
+    )
     assert config_for(CarFollowingEnv(lead=synthetic(0, count=2))) == ShieldConfig()
 
 
@@ -157,8 +163,9 @@ def test_vectorised_copies_write_streams_of_their_own() -> None:
     from stable_baselines3.common.env_util import make_vec_env
 
     shared = LocalShield(config_for(Ledge(), EDGE))
-    venv = make_vec_env(Ledge, n_envs=4, seed=0, wrapper_class=ShieldWrapper,
-                        wrapper_kwargs={"shield": shared})
+    venv = make_vec_env(
+        Ledge, n_envs=4, seed=0, wrapper_class=ShieldWrapper, wrapper_kwargs={"shield": shared}
+    )
     venv.reset()
     for _ in range(3):
         venv.step(np.zeros((4, 1), np.float32))
@@ -172,8 +179,12 @@ def test_gymnasium_vector_envs_take_the_wrapper_per_copy() -> None:
 
     shared = LocalShield(config_for(Ledge(), EDGE))
     gym.register("LedgeForTest-v0", entry_point=Ledge)
-    venv = gym.make_vec("LedgeForTest-v0", num_envs=3, vectorization_mode="sync",
-                        wrappers=[functools.partial(ShieldWrapper, shield=shared)])
+    venv = gym.make_vec(
+        "LedgeForTest-v0",
+        num_envs=3,
+        vectorization_mode="sync",
+        wrappers=[functools.partial(ShieldWrapper, shield=shared)],
+    )
     venv.reset(seed=0)
     for _ in range(4):
         _, _, _, _, info = venv.step(np.zeros((3, 1), np.float32))
@@ -183,8 +194,9 @@ def test_gymnasium_vector_envs_take_the_wrapper_per_copy() -> None:
 
 
 def test_a_failure_that_does_not_end_the_episode_is_learned() -> None:
-    env = ShieldWrapper(Ledge(bumps=True),
-                        config=ledge_config({"edge": "decrease", "bump": "decrease"}))
+    env = ShieldWrapper(
+        Ledge(bumps=True), config=ledge_config({"edge": "decrease", "bump": "decrease"})
+    )
     infos = pushing(5, env)
     bumps = sum(i["event"] == "bump" for i in infos)
     assert bumps > 0
@@ -193,8 +205,9 @@ def test_a_failure_that_does_not_end_the_episode_is_learned() -> None:
 
 
 def test_a_failure_predicate_replaces_info() -> None:
-    def low(observation: Any, reward: float, terminated: bool, truncated: bool,
-            info: dict[str, Any]) -> str | None:
+    def low(
+        observation: Any, reward: float, terminated: bool, truncated: bool, info: dict[str, Any]
+    ) -> str | None:
         return "edge" if observation[0] > 0.8 else None  # before the ledge itself
 
     env = ShieldWrapper(Ledge(), criteria=EDGE, failure=low)
@@ -205,8 +218,13 @@ def test_a_failure_predicate_replaces_info() -> None:
 def test_the_same_seed_gives_the_same_shield_and_evaluation_learns_nothing() -> None:
     def decisions(seed: int) -> list[dict[str, Any]]:
         """The paper's reviser, whose revisions carry noise from the shield's seed."""
-        config = config_for(Ledge(), EDGE, base=ShieldConfig.paper(
-            reviser=ReviserConfig(method="paper", activate_after_episodes=5)))
+        config = config_for(
+            Ledge(),
+            EDGE,
+            base=ShieldConfig.paper(
+                reviser=ReviserConfig(method="paper", activate_after_episodes=5)
+            ),
+        )
         env = ShieldWrapper(Ledge(), config=config, stream="point")
         env.reset(seed=seed)
         return [i["shield"] for i in pushing(40, env, seed=1)]
@@ -227,8 +245,9 @@ def test_warm_up_in_steps_reports_but_does_not_revise() -> None:
     infos = pushing(40, env)
     would = [i for i in infos if i["shield"]["revised"]]
     assert would and all(i["shield"]["shadow"] for i in would)
-    assert all(i["applied_action"][0] == pytest.approx(i["proposed_action"], abs=1e-6)
-               for i in infos)
+    assert all(
+        i["applied_action"][0] == pytest.approx(i["proposed_action"], abs=1e-6) for i in infos
+    )
 
 
 def test_the_wrapper_closes_only_the_shield_it_made() -> None:
@@ -243,10 +262,11 @@ def test_the_wrapper_closes_only_the_shield_it_made() -> None:
 
 
 def test_the_environment_is_registered_with_its_time_limit() -> None:
-    code = ("import gymnasium as gym; env = gym.make('client.sim:CarFollowing-v0'); "
-            "print(env.spec.max_episode_steps)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True)
+    code = (
+        "import gymnasium as gym; env = gym.make('client.sim:CarFollowing-v0'); "
+        "print(env.spec.max_episode_steps)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "800"
 
 
@@ -272,9 +292,16 @@ def test_sb3_learns_from_the_applied_action() -> None:
     env = ShieldWrapper(Ledge(), config=ledge_config())
     pushing(40, env)  # the shield has met the ledge before the learner starts
     pushy = NormalActionNoise(mean=np.array([0.6]), sigma=np.array([0.3]))  # towards the ledge
-    model = TD3("MlpPolicy", env, learning_starts=50, train_freq=1, seed=0, action_noise=pushy,
-                replay_buffer_class=AppliedActionReplayBuffer,
-                policy_kwargs={"net_arch": [16, 16]})
+    model = TD3(
+        "MlpPolicy",
+        env,
+        learning_starts=50,
+        train_freq=1,
+        seed=0,
+        action_noise=pushy,
+        replay_buffer_class=AppliedActionReplayBuffer,
+        policy_kwargs={"net_arch": [16, 16]},
+    )
     callback = Applied()
     lines: list[str] = []
     failures = Failures(report=lines.append, every_s=0.0)  # a progress line every step
@@ -287,8 +314,9 @@ def test_sb3_learns_from_the_applied_action() -> None:
     np.testing.assert_allclose(stored, np.array(callback.applied), atol=1e-6)  # [-1, 1] here
 
 
-def crashed(observation: Any, reward: float, terminated: bool, truncated: bool,
-            info: dict[str, Any]) -> str | None:
+def crashed(
+    observation: Any, reward: float, terminated: bool, truncated: bool, info: dict[str, Any]
+) -> str | None:
     """Ledge's failure where it reports it as highway-env does, under ``info["crashed"]``."""
     return "edge" if info["crashed"] else None
 
@@ -341,21 +369,25 @@ def test_no_warning_while_failures_come_or_episodes_end_otherwise() -> None:
 
 
 def test_a_predicate_that_never_fires_warns_about_itself() -> None:
-    def never(observation: Any, reward: float, terminated: bool, truncated: bool,
-              info: dict[str, Any]) -> str | None:
+    def never(
+        observation: Any, reward: float, terminated: bool, truncated: bool, info: dict[str, Any]
+    ) -> str | None:
         return None
 
     caught = silence_warnings(ShieldWrapper(Ledge(), config=ledge_config(), failure=never), 20)
-    assert len(caught) == 1 and "failure= predicate returned None at every step" \
-        in str(caught[0].message)
+    assert len(caught) == 1 and "failure= predicate returned None at every step" in str(
+        caught[0].message
+    )
 
 
 def test_a_predicate_of_the_wrong_shape_is_refused_with_the_five_arguments() -> None:
-    with pytest.raises(TypeError, match=r"failure\(observation, reward, terminated, "
-                                        r"truncated, info\)"):
+    with pytest.raises(
+        TypeError,
+        match=r"failure\(observation, reward, terminated, "
+        r"truncated, info\)",
+    ):
         ShieldWrapper(Ledge(), criteria=EDGE, failure=lambda info: info.get("crashed"))
-    yes_no = ShieldWrapper(Ledge(), criteria=EDGE,
-                           failure=lambda o, r, te, tr, info: te)  # type: ignore[arg-type,return-value]
+    yes_no = ShieldWrapper(Ledge(), criteria=EDGE, failure=lambda o, r, te, tr, info: te)  # type: ignore[arg-type,return-value]
     yes_no.reset(seed=0)
     with pytest.raises(TypeError, match="the name of the criterion that failed .* not False"):
         yes_no.step(np.array([0.0], np.float32))
@@ -363,8 +395,10 @@ def test_a_predicate_of_the_wrong_shape_is_refused_with_the_five_arguments() -> 
 
 def test_the_vector_wrapper_warns_as_the_wrapper_does() -> None:
     gym.register("LedgeCrashedForTest-v0", entry_point=Ledge, kwargs={"key": "crashed"})
-    envs = ShieldVectorWrapper(gym.make_vec("LedgeCrashedForTest-v0", num_envs=2,
-                                            vectorization_mode="sync"), config=ledge_config())
+    envs = ShieldVectorWrapper(
+        gym.make_vec("LedgeCrashedForTest-v0", num_envs=2, vectorization_mode="sync"),
+        config=ledge_config(),
+    )
     envs.reset(seed=0)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -400,9 +434,12 @@ def test_a_sample_of_observations_gives_the_range_widened_by_the_margin() -> Non
     mixed = config_for(env, EDGE, observations=sample, high=[1.0, 9.0])
     assert mixed.observation.high == (1.0, 9.0)
     assert mixed.observation.low == config.observation.low
-    for bad, message in ((np.zeros((3, 3)), r"rows of the observation's 2 numbers"),
-                         ([[0.0, np.nan]], "not finite"), ([], "shape \\(0,\\)"),
-                         ([["a", "b"]], "an array of numbers")):
+    for bad, message in (
+        (np.zeros((3, 3)), r"rows of the observation's 2 numbers"),
+        ([[0.0, np.nan]], "not finite"),
+        ([], "shape \\(0,\\)"),
+        ([["a", "b"]], "an array of numbers"),
+    ):
         with pytest.raises(SpaceMismatch, match=message) as error:
             config_for(env, EDGE, observations=bad)
         assert error.value.field == "observations"
@@ -415,6 +452,7 @@ def test_sample_observations_reads_what_the_shield_sees() -> None:
     assert not np.array_equal(sample, sample_observations(Ledge(bounded=False), 120, 4))
     cars = sample_observations(CarFollowingEnv(lead=synthetic(0, count=2)), steps=50)
     assert cars.shape == (50, 3)  # info["efsm_observation"], not the observation
-    env = ShieldWrapper(Ledge(bounded=False),
-                        config=config_for(Ledge(bounded=False), EDGE, observations=sample))
+    env = ShieldWrapper(
+        Ledge(bounded=False), config=config_for(Ledge(bounded=False), EDGE, observations=sample)
+    )
     pushing(3, env)  # the derived configuration guards the environment

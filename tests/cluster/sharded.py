@@ -15,8 +15,9 @@ from app.settings import Settings
 
 
 @contextmanager
-def sharded_clients(settings: Settings, n_shards: int = 2, n_ingresses: int = 1
-                    ) -> Iterator[tuple[list[TestClient], list[ShardServer]]]:
+def sharded_clients(
+    settings: Settings, n_shards: int = 2, n_ingresses: int = 1
+) -> Iterator[tuple[list[TestClient], list[ShardServer]]]:
     """Clients of ``n_ingresses`` ingresses over the same ``n_shards`` in-process shards."""
     servers: list[ShardServer] = []
 

@@ -15,12 +15,13 @@ from tests.api.test_idempotency import *  # noqa: F403
 from tests.cluster.sharded import sharded_client
 
 SHARD_SPECIFIC = {  # what a sharded service answers otherwise, and why
-    "test_metrics_count_requests_decisions_and_states":
-        "metrics are the shards' own, each sample labelled with its shard (test_ingress.py)",
-    "test_openapi_documents_every_request_field":
-        "the schema is the ingress's: its routes forward to the shards' documented ones",
-    "test_the_default_model_takes_its_configuration_from_a_file":
-        "builds the plain app itself",
+    "test_metrics_count_requests_decisions_and_states": (
+        "metrics are the shards' own, each sample labelled with its shard (test_ingress.py)"
+    ),
+    "test_openapi_documents_every_request_field": (
+        "the schema is the ingress's: its routes forward to the shards' documented ones"
+    ),
+    "test_the_default_model_takes_its_configuration_from_a_file": "builds the plain app itself",
 }
 
 for _name in SHARD_SPECIFIC:

@@ -24,8 +24,12 @@ NAMES = [f"car-{i}" for i in range(8)]
 
 
 def step(t: int, done: bool = False) -> dict[str, Any]:
-    return {"observation": [10.0 + t % 7, 12.0 - t % 5, 9.0], "action": 0.5 - 0.1 * (t % 4),
-            "done": done, "event": "collision" if done else None}
+    return {
+        "observation": [10.0 + t % 7, 12.0 - t % 5, 9.0],
+        "action": 0.5 - 0.1 * (t % 4),
+        "done": done,
+        "event": "collision" if done else None,
+    }
 
 
 def test_each_model_lives_on_its_home_shard_and_is_listed_once() -> None:
@@ -35,8 +39,7 @@ def test_each_model_lives_on_its_home_shard_and_is_listed_once() -> None:
         for index, server in enumerate(servers):
             expected = {n for n in [*NAMES, "default"] if hashed_owner(n, 3) == index}
             assert set(server.registry.names()) == expected
-        assert [m["name"] for m in c.get("/models").json()["models"]] == sorted(
-            [*NAMES, "default"])
+        assert [m["name"] for m in c.get("/models").json()["models"]] == sorted([*NAMES, "default"])
         assert c.post("/models", json={"name": NAMES[0]}).json()["error"]["code"] == "model_exists"
 
 
@@ -46,18 +49,25 @@ def test_a_batch_across_models_of_several_shards_is_refused_and_changes_nothing(
         together = next(n for n in NAMES if n != a and hashed_owner(n, 2) == 0)
         for name in (a, b, together):
             c.post("/models", json={"name": name})
-        r = c.post("/revise/batch", json={"steps": [{**step(0), "model": a},
-                                                    {**step(1), "model": b}]})
+        r = c.post(
+            "/revise/batch", json={"steps": [{**step(0), "model": a}, {**step(1), "model": b}]}
+        )
         assert r.status_code == 422
-        assert r.json()["error"] == {"code": "models_on_several_shards", "field": "steps",
-                                     "message": r.json()["error"]["message"]}
+        assert r.json()["error"] == {
+            "code": "models_on_several_shards",
+            "field": "steps",
+            "message": r.json()["error"]["message"],
+        }
         assert all(m["model_version"] == 0 for m in c.get("/models").json()["models"])
-        r = c.post("/revise/batch", json={"steps": [{**step(0), "model": a},
-                                                    {**step(1), "model": together}]})
+        r = c.post(
+            "/revise/batch",
+            json={"steps": [{**step(0), "model": a}, {**step(1), "model": together}]},
+        )
         assert r.status_code == 200 and len(r.json()["decisions"]) == 2
         c.post("/shards/move", json={"model": b, "to": 0})  # together now
-        r = c.post("/revise/batch", json={"steps": [{**step(2), "model": a},
-                                                    {**step(3), "model": b}]})
+        r = c.post(
+            "/revise/batch", json={"steps": [{**step(2), "model": a}, {**step(3), "model": b}]}
+        )
         assert r.status_code == 200 and len(r.json()["decisions"]) == 2
 
 
@@ -73,8 +83,11 @@ def test_a_moved_model_goes_on_deciding_as_if_it_had_never_moved(tmp_path: Path)
             if t in (20, 40):  # there and back again
                 to = 1 - home if t == 20 else home
                 r = c.post("/shards/move", json={"model": name, "to": to})
-                assert r.status_code == 200 and r.json() == {"model": name, "from": 1 - to,
-                                                             "to": to}
+                assert r.status_code == 200 and r.json() == {
+                    "model": name,
+                    "from": 1 - to,
+                    "to": to,
+                }
                 assert name in servers[to].registry.names()
                 assert name not in servers[1 - to].registry.names()
             body = step(t, done=t % 15 == 14)
@@ -101,8 +114,9 @@ def test_every_ingress_follows_a_move_made_through_another() -> None:
         for t, to in enumerate([(home + 1) % 3, (home + 2) % 3, home, (home + 1) % 3]):
             r = first.post("/shards/move", json={"model": name, "to": to})
             assert r.status_code == 200, r.text
-            versions.append(second.post(f"/models/{name}/revise", json=step(t)).json()
-                            ["model_version"])
+            versions.append(
+                second.post(f"/models/{name}/revise", json=step(t)).json()["model_version"]
+            )
             with second.websocket_connect(f"/models/{name}/ws") as ws:
                 ws.send_text(json.dumps(step(t)))
                 versions.append(json.loads(ws.receive_text())["model_version"])
@@ -171,10 +185,12 @@ def test_metrics_are_merged_with_a_shard_label() -> None:
         c.post("/revise", json=step(0))
         text = c.get("/metrics").text
         owner = hashed_owner("default", 2)
-        assert (f'efsm_http_requests_total{{shard="{owner}",method="POST",route="/revise",'
-                'status="200"} 1.0') in text
+        assert (
+            f'efsm_http_requests_total{{shard="{owner}",method="POST",route="/revise",'
+            'status="200"} 1.0'
+        ) in text
         assert text.count("# TYPE efsm_http_requests_total counter") == 1
-    merged = merge_metrics(["# TYPE up gauge\nup 1.0\n", "# TYPE up gauge\nup{job=\"x\"} 0.0\n"])
+    merged = merge_metrics(["# TYPE up gauge\nup 1.0\n", '# TYPE up gauge\nup{job="x"} 0.0\n'])
     assert merged == '# TYPE up gauge\nup{shard="0"} 1.0\nup{shard="1",job="x"} 0.0\n'
 
 
@@ -205,8 +221,9 @@ def test_a_streamed_answer_passes_on_as_it_comes_and_stops_when_the_reader_leave
         await send({"type": "http.response.start", "status": 200, "headers": []})
         try:
             for piece in range(1000):
-                await send({"type": "http.response.body", "body": b"%d;" % piece,
-                            "more_body": True})
+                await send(
+                    {"type": "http.response.body", "body": b"%d;" % piece, "more_body": True}
+                )
                 await asyncio.sleep(0)
         finally:
             finished.append(True)
@@ -234,9 +251,15 @@ def test_a_shard_streams_the_live_feed_and_ends_it_once_the_model_moved() -> Non
             async for part in seen:
                 parts.append(part)
                 if len(parts) == 2:  # the head and the hello: step, then move
-                    await servers[home].request(asgi.Request(
-                        "POST", "/revise", b"", ((b"content-type", b"application/json"),),
-                        json.dumps(step(0)).encode()))
+                    await servers[home].request(
+                        asgi.Request(
+                            "POST",
+                            "/revise",
+                            b"",
+                            ((b"content-type", b"application/json"),),
+                            json.dumps(step(0)).encode(),
+                        )
+                    )
                 if len(parts) == 3:
                     assert (await servers[home].move("default", 1 - home)).status == 200
             return parts

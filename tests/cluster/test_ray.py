@@ -35,8 +35,12 @@ pytestmark = pytest.mark.xdist_group("ray")
 
 def step(t: int) -> dict[str, Any]:
     done = t % 25 == 24
-    return {"observation": [10.0 + t % 9, 12.0 - t % 6, 9.0 + t % 4],
-            "action": 0.6 - 0.15 * (t % 5), "done": done, "event": "collision" if done else None}
+    return {
+        "observation": [10.0 + t % 9, 12.0 - t % 6, 9.0 + t % 4],
+        "action": 0.6 - 0.15 * (t % 5),
+        "done": done,
+        "event": "collision" if done else None,
+    }
 
 
 class Cluster:
@@ -59,10 +63,30 @@ class Cluster:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "app", "serve-ray", "--host", "127.0.0.1", "--port",
-             str(self.port), "--data-dir", str(data_dir), "--shards", "2", "--ingresses", "2",
-             "--fsync", "always", "--ray-cpus", "2"],
-            stdout=open(self.log, "wb"), stderr=subprocess.STDOUT, start_new_session=True)
+            [
+                sys.executable,
+                "-m",
+                "app",
+                "serve-ray",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(self.port),
+                "--data-dir",
+                str(data_dir),
+                "--shards",
+                "2",
+                "--ingresses",
+                "2",
+                "--fsync",
+                "always",
+                "--ray-cpus",
+                "2",
+            ],
+            stdout=open(self.log, "wb"),
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
         deadline = time.monotonic() + 180
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
@@ -140,14 +164,14 @@ def test_the_contract_through_ray(cluster: Cluster, plain: TestClient) -> None:
     ws = create_connection(u.replace("http", "ws") + "/models/car-2/ws")
     for t in range(20):
         ws.send(json.dumps(step(t)))
-        assert json.loads(ws.recv()) == plain.post(
-            "/models/car-2/revise", json=step(t)).json()
+        assert json.loads(ws.recv()) == plain.post("/models/car-2/revise", json=step(t)).json()
     ws.send("{not json")
     assert "invalid_json" in ws.recv()
     ws.close()
     snapshot = httpx.get(u + "/models/car-1", params={"format": "npz"}).content
-    put = httpx.put(u + "/models/car-3", content=snapshot,
-                    headers={"content-type": "application/x-npz"})
+    put = httpx.put(
+        u + "/models/car-3", content=snapshot, headers={"content-type": "application/x-npz"}
+    )
     assert put.status_code == 200 and put.json()["model_version"] == 30
     names = [m["name"] for m in httpx.get(u + "/models").json()["models"]]
     assert names == ["car-1", "car-2", "car-3", "default"]
@@ -155,7 +179,8 @@ def test_the_contract_through_ray(cluster: Cluster, plain: TestClient) -> None:
 
 
 def test_a_killed_shard_comes_back_with_every_acknowledged_step(
-        cluster: Cluster, plain: TestClient) -> None:
+    cluster: Cluster, plain: TestClient
+) -> None:
     u, name = cluster.url, "killed"
     assert httpx.post(u + "/models", json={"name": name}).status_code == 201
     plain.post("/models", json={"name": name})
@@ -171,7 +196,8 @@ def test_a_killed_shard_comes_back_with_every_acknowledged_step(
 
 
 def test_a_model_moves_between_shards_under_load_without_losing_a_step(
-        cluster: Cluster, plain: TestClient) -> None:
+    cluster: Cluster, plain: TestClient
+) -> None:
     u = cluster.url
     moved, other = "moved", "beside"
     for name in (moved, other):
@@ -201,8 +227,10 @@ def test_a_model_moves_between_shards_under_load_without_losing_a_step(
     for writer in writers:
         writer.join(120)
     for name in (moved, other):
-        expected = [plain.post(f"/models/{name}/revise", json=step(t)).json()
-                    for t in range(len(answers[name]))]
+        expected = [
+            plain.post(f"/models/{name}/revise", json=step(t)).json()
+            for t in range(len(answers[name]))
+        ]
         assert answers[name] == expected
     shards = httpx.get(u + "/shards").json()
     assert moved in shards["shards"][1 - home]["models"]
@@ -210,7 +238,8 @@ def test_a_model_moves_between_shards_under_load_without_losing_a_step(
 
 
 def test_the_live_feed_through_ray_ends_at_a_move_and_resumes_where_the_model_went(
-        cluster: Cluster) -> None:
+    cluster: Cluster,
+) -> None:
     u, name = cluster.url, "watched"
     assert httpx.post(u + "/models", json={"name": name}).status_code == 201
 
@@ -225,8 +254,9 @@ def test_the_live_feed_through_ray_ends_at_a_move_and_resumes_where_the_model_we
         httpx.post(f"{u}/models/{name}/revise", json=step(0))
         assert next(feed)["decision"]["model_version"] == 1
         home = hashed_owner(name, 2)
-        assert httpx.post(u + "/shards/move", json={"model": name, "to": 1 - home}).status_code \
-            == 200
+        assert (
+            httpx.post(u + "/shards/move", json={"model": name, "to": 1 - home}).status_code == 200
+        )
         began = time.monotonic()
         after = {e["type"] for e in feed}  # until the stream ends, at the feed's next ping
         assert after == {"ping"} and time.monotonic() - began < 30
@@ -250,24 +280,31 @@ def test_the_dashboard_follows_a_model_through_ray(cluster: Cluster) -> None:
         page.on("pageerror", lambda e: errors.append(str(e)))
         page.goto(f"{u}/dashboard")
         page.select_option("#model", name)
-        page.wait_for_function(f"document.getElementById('status').textContent == 'live: {name}'",
-                               timeout=20000)
-        probe = httpx.post(f"{u}/models/{name}/revise", json={**step(80), "observation":
-                                                              [31.0, 400.0, 1.0]}).json()
+        page.wait_for_function(
+            f"document.getElementById('status').textContent == 'live: {name}'", timeout=20000
+        )
+        probe = httpx.post(
+            f"{u}/models/{name}/revise", json={**step(80), "observation": [31.0, 400.0, 1.0]}
+        ).json()
         assert probe["new_state"]  # far beyond the stream: a new state, which the page shows
         page.wait_for_function(
             f"document.getElementById('state-count').textContent == '{probe['n_states']}'",
-            timeout=10000)
+            timeout=10000,
+        )
         browser.close()
     assert errors == []
 
 
 def test_a_data_directory_of_another_cluster_size_is_refused_in_one_line(tmp_path: Path) -> None:
     (tmp_path / "cluster.json").write_text('{"shards": 2}')
-    done = subprocess.run([sys.executable, "-m", "app", "serve-ray", "--shards", "3",
-                           "--data-dir", str(tmp_path)], capture_output=True, text=True,
-                          timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-m", "app", "serve-ray", "--shards", "3", "--data-dir", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 1
     assert done.stderr.strip().splitlines()[-1] == (
         f"{tmp_path} holds a cluster of 2 shards, not 3: its models stay on the shards that "
-        "hold their files; start it with the same number")
+        "hold their files; start it with the same number"
+    )

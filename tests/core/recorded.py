@@ -24,18 +24,21 @@ STEPS = 12_000
 EPISODE = 400  # steps before an episode ends without a failure
 # the default criteria without their bounds, as before bounds were declared
 UNBOUNDED = tuple(dataclasses.replace(c, bound=None) for c in ShieldConfig().criteria)
-PRESETS = {"default": ShieldConfig, "paper": ShieldConfig.paper,
-           # the default before the reach and its bounds (recorded by the core at 6f6cc72,
-           # again when the risk reviser's end bins began applying the range's ends)
-           "no-reach": lambda: ShieldConfig(criteria=UNBOUNDED,
-                                            risk=RiskConfig(reach_horizon=0))}
+PRESETS = {
+    "default": ShieldConfig,
+    "paper": ShieldConfig.paper,
+    # the default before the reach and its bounds (recorded by the core at 6f6cc72,
+    # again when the risk reviser's end bins began applying the range's ends)
+    "no-reach": lambda: ShieldConfig(criteria=UNBOUNDED, risk=RiskConfig(reach_horizon=0)),
+}
 
 
 def preset(name: str) -> ShieldConfig:
     """The recorded configurations, each reviser activated after 5 episodes."""
     config = PRESETS[name]()
     return dataclasses.replace(
-        config, reviser=dataclasses.replace(config.reviser, activate_after_episodes=5))
+        config, reviser=dataclasses.replace(config.reviser, activate_after_episodes=5)
+    )
 
 
 def drive(config: ShieldConfig, steps: int = STEPS, seed: int = 0) -> dict[str, npt.NDArray]:
@@ -77,9 +80,15 @@ def run(shield: Shield, steps: int = STEPS, seed: int = 0) -> dict[str, npt.NDAr
         reason[t], verdict[t] = decision.reason, decision.verdict
     snapshot = shield.snapshot()
     local = snapshot["local_risk"]
-    return {"applied": applied, "state": state, "n_states": n_states, "revised": revised,
-            "reason": reason, "verdict": verdict,
-            "local_theta": np.zeros(0) if local is None else local["theta"]}
+    return {
+        "applied": applied,
+        "state": state,
+        "n_states": n_states,
+        "revised": revised,
+        "reason": reason,
+        "verdict": verdict,
+        "local_theta": np.zeros(0) if local is None else local["theta"],
+    }
 
 
 def path(name: str) -> Path:

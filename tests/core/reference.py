@@ -40,8 +40,9 @@ def pairwise_sum(x: Sequence[float] | FloatArray) -> float:
         for i in range(8, whole, 8):
             for lane in range(8):
                 sums[lane] += values[i + lane]
-        total = ((sums[0] + sums[1]) + (sums[2] + sums[3])) + ((sums[4] + sums[5])
-                                                               + (sums[6] + sums[7]))
+        total = ((sums[0] + sums[1]) + (sums[2] + sums[3])) + (
+            (sums[4] + sums[5]) + (sums[6] + sums[7])
+        )
         for v in values[whole:]:
             total += v
         return total
@@ -62,8 +63,13 @@ def monotone(q_table: FloatArray, directions: Sequence[str | None]) -> FloatArra
     return out
 
 
-def decide(local: FloatArray, reached: FloatArray | None, proposed_bin: int, threshold: float,
-           margin: float) -> tuple[float, int, int]:
+def decide(
+    local: FloatArray,
+    reached: FloatArray | None,
+    proposed_bin: int,
+    threshold: float,
+    margin: float,
+) -> tuple[float, int, int]:
     """The decision on one table: each criterion's risk the mean of the local model's and
     the reach's (the local alone without the reach), the total ``1 - prod(1 - risk)``; the
     limit the threshold or the least total plus the margin; the proposal when within it,
@@ -78,8 +84,9 @@ def decide(local: FloatArray, reached: FloatArray | None, proposed_bin: int, thr
     return limit, verdict, int(allowed[order[0]])
 
 
-def recognise(sq_distances: FloatArray, variances: FloatArray,
-              k: int) -> tuple[IntArray, FloatArray]:
+def recognise(
+    sq_distances: FloatArray, variances: FloatArray, k: int
+) -> tuple[IntArray, FloatArray]:
     """Eq. 1 as a softmax of ``-d^2 / var`` over the top k states (app.core.belief)."""
     logits = -sq_distances / variances
     index = np.flatnonzero(logits >= logits.max() + np.log(np.finfo(np.float64).eps))
@@ -92,24 +99,32 @@ def recognise(sq_distances: FloatArray, variances: FloatArray,
     return index[keep], weights[keep] / pairwise_sum(weights[keep])
 
 
-def cluster(state: dict[str, FloatArray], z: FloatArray, epsilon: float, rho: float,
-            max_states: int) -> str:
+def cluster(
+    state: dict[str, FloatArray], z: FloatArray, epsilon: float, rho: float, max_states: int
+) -> str:
     """One eTS+ step with the radius spread (app.core.clustering) on plain arrays in
     ``state`` (centres, potentials, radii, support, scatter, beta, sigma, k)."""
     state["k"] += 1
     k, theta = state["k"], float(np.sum(z * z))
     centres = state["centres"]
     if not len(centres):
-        state.update(centres=z[None], potentials=np.ones(1), radii=np.full(1, epsilon),
-                     support=np.ones(1), scatter=np.zeros(1))
+        state.update(
+            centres=z[None],
+            potentials=np.ones(1),
+            radii=np.full(1, epsilon),
+            support=np.ones(1),
+            scatter=np.zeros(1),
+        )
         kind = "new"
     else:
-        d2 = np.maximum(np.sum(centres * centres, axis=1) - 2.0 * np.sum(centres * z, axis=1)
-                        + theta, 0.0)
+        d2 = np.maximum(
+            np.sum(centres * centres, axis=1) - 2.0 * np.sum(centres * z, axis=1) + theta, 0.0
+        )
         nu = float(np.sum(z * state["beta"]))
         p_new = (k - 1) / ((k - 1) * (theta + 1.0) + state["sigma"] - 2.0 * nu)
-        pot = state["potentials"] = (k - 1) * state["potentials"] / (
-            k - 2 + state["potentials"] * (1.0 + d2))
+        pot = state["potentials"] = (
+            (k - 1) * state["potentials"] / (k - 2 + state["potentials"] * (1.0 + d2))
+        )
         nearest = int(d2.argmin())
         candidate = p_new > pot.max() or p_new < pot.min()
         if candidate and np.sqrt(d2[nearest]) < epsilon:
@@ -117,8 +132,12 @@ def cluster(state: dict[str, FloatArray], z: FloatArray, epsilon: float, rho: fl
             kind = "replaced"
         elif candidate and len(centres) < max_states:
             state["centres"] = np.vstack([centres, z])
-            for name, value in (("potentials", p_new), ("radii", epsilon), ("support", 1.0),
-                                ("scatter", 0.0)):
+            for name, value in (
+                ("potentials", p_new),
+                ("radii", epsilon),
+                ("support", 1.0),
+                ("scatter", 0.0),
+            ):
                 state[name] = np.append(state[name], value)
             kind = "new"
         else:
@@ -132,10 +151,19 @@ def cluster(state: dict[str, FloatArray], z: FloatArray, epsilon: float, rho: fl
     return kind
 
 
-def reach(dynamics: FloatArray, prob: FloatArray, z: FloatArray, midpoints: FloatArray,
-          safe_bin: int, points: FloatArray, horizon: int, radius: float,
-          peak: FloatArray | None = None, extent: FloatArray | None = None,
-          bound: tuple[int, float, float] | None = None) -> FloatArray:
+def reach(
+    dynamics: FloatArray,
+    prob: FloatArray,
+    z: FloatArray,
+    midpoints: FloatArray,
+    safe_bin: int,
+    points: FloatArray,
+    horizon: int,
+    radius: float,
+    peak: FloatArray | None = None,
+    extent: FloatArray | None = None,
+    bound: tuple[int, float, float] | None = None,
+) -> FloatArray:
     """Each bin's reach risk for one criterion (app.core.reach): the belief's blend of the
     states' dynamics, one step under the bin, then ``horizon - 1`` under ``safe_bin``, each
     point's closeness ``max(0, 1 - distance / radius)`` to the nearest failure point; with a
@@ -161,11 +189,19 @@ def reach(dynamics: FloatArray, prob: FloatArray, z: FloatArray, midpoints: Floa
     return out
 
 
-def _crossing(model: FloatArray, peak: FloatArray, extent: FloatArray, z: FloatArray,
-              u: float, u_safe: float, bound: tuple[int, float, float], horizon: int) -> float:
+def _crossing(
+    model: FloatArray,
+    peak: FloatArray,
+    extent: FloatArray,
+    z: FloatArray,
+    u: float,
+    u_safe: float,
+    bound: tuple[int, float, float],
+    horizon: int,
+) -> float:
     b, below, above = bound
     d = z.shape[0]
-    gains = np.eye(d) + model[:, 1:d + 1]
+    gains = np.eye(d) + model[:, 1 : d + 1]
     up, down = np.maximum(gains, 0.0), np.minimum(gains, 0.0)
     widen = peak.copy()
     widen[b] = 0.0

@@ -89,8 +89,7 @@ def test_the_compiled_clustering_gives_the_numpy_reading(seed: int) -> None:
     rng = np.random.default_rng(seed)
     config = ClusteringConfig(epsilon=0.15)
     clusterer = EvolvingClusterer(config, 3, max_states=12)
-    state: dict[str, Any] = {"centres": np.zeros((0, 3)), "beta": np.zeros(3), "sigma": 0.0,
-                             "k": 0}
+    state: dict[str, Any] = {"centres": np.zeros((0, 3)), "beta": np.zeros(3), "sigma": 0.0, "k": 0}
     z = rng.uniform(0, 1, 3)
     for _ in range(3000):
         z = np.clip(z + rng.normal(0, 0.08, 3), 0, 1)

@@ -23,9 +23,34 @@ CORE = Path(__file__).parents[2] / "app" / "core"
 
 # numpy functions whose results follow the CPU: transcendental SIMD loops and BLAS products
 CPU_DEPENDENT = {
-    "exp", "exp2", "expm1", "log", "log1p", "log2", "log10", "logaddexp", "logaddexp2",
-    "power", "float_power", "sin", "cos", "tan", "arcsin", "arccos", "arctan", "arctan2",
-    "sinh", "cosh", "tanh", "dot", "vdot", "inner", "matmul", "einsum", "tensordot", "linalg",
+    "exp",
+    "exp2",
+    "expm1",
+    "log",
+    "log1p",
+    "log2",
+    "log10",
+    "logaddexp",
+    "logaddexp2",
+    "power",
+    "float_power",
+    "sin",
+    "cos",
+    "tan",
+    "arcsin",
+    "arccos",
+    "arctan",
+    "arctan2",
+    "sinh",
+    "cosh",
+    "tanh",
+    "dot",
+    "vdot",
+    "inner",
+    "matmul",
+    "einsum",
+    "tensordot",
+    "linalg",
 }
 
 
@@ -33,8 +58,12 @@ def cpu_dependent_uses(source: str) -> list[str]:
     """``np.<name>`` of :data:`CPU_DEPENDENT`, ``.dot(`` and ``@`` in a module's source."""
     found = []
     for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) \
-                and node.value.id == "np" and node.attr in CPU_DEPENDENT:
+        if (
+            isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and node.value.id == "np"
+            and node.attr in CPU_DEPENDENT
+        ):
             found.append(f"line {node.lineno}: np.{node.attr}")
         elif isinstance(node, ast.Attribute) and node.attr == "dot":
             found.append(f"line {node.lineno}: .dot")
@@ -45,8 +74,12 @@ def cpu_dependent_uses(source: str) -> list[str]:
 
 def test_the_scan_finds_what_it_looks_for() -> None:
     source = "import numpy as np\nx = np.exp(a) + b @ c\ny = a.dot(b)\nz = np.linalg.solve(a, b)\n"
-    assert sorted(cpu_dependent_uses(source)) == ["line 2: @", "line 2: np.exp",
-                                                  "line 3: .dot", "line 4: np.linalg"]
+    assert sorted(cpu_dependent_uses(source)) == [
+        "line 2: @",
+        "line 2: np.exp",
+        "line 3: .dot",
+        "line 4: np.linalg",
+    ]
 
 
 @pytest.mark.parametrize("path", sorted(CORE.glob("*.py")), ids=lambda p: p.name)
@@ -57,7 +90,8 @@ def test_no_core_module_uses_arithmetic_whose_last_bits_follow_the_cpu(path: Pat
 @pytest.mark.slow  # long streams: seconds
 @pytest.mark.parametrize("config", [ShieldConfig(), ShieldConfig.paper()], ids=["risk", "paper"])
 def test_a_restored_model_whose_arrays_lie_elsewhere_decides_as_the_original(
-        config: ShieldConfig) -> None:
+    config: ShieldConfig,
+) -> None:
     """A snapshot round trip puts every array at a new address (and alignment); the restored
     model must decide, and go on learning, bit for bit as the original."""
     rng = np.random.default_rng(5)

@@ -24,14 +24,30 @@ def test_each_episode_end_keeps_the_totals_of_that_moment() -> None:
         failed = episode % 3 == 0
         shield.step([0.95], None, done=True, event="collision" if failed else None)
         c = shield.counters
-        seen.append((c.episodes, c.steps, shield.n_states, c.interventions["collision"],
-                     c.interventions["large_distance"], c.failures["collision"],
-                     c.failures["large_distance"]))
+        seen.append(
+            (
+                c.episodes,
+                c.steps,
+                shield.n_states,
+                c.interventions["collision"],
+                c.interventions["large_distance"],
+                c.failures["collision"],
+                c.failures["large_distance"],
+            )
+        )
     view = shield.history_view()
-    rows = list(zip(view["episodes"], view["steps"], view["n_states"],
-                    view["interventions"]["collision"], view["interventions"]["large_distance"],
-                    view["failures"]["collision"], view["failures"]["large_distance"],
-                    strict=True))
+    rows = list(
+        zip(
+            view["episodes"],
+            view["steps"],
+            view["n_states"],
+            view["interventions"]["collision"],
+            view["interventions"]["large_distance"],
+            view["failures"]["collision"],
+            view["failures"]["large_distance"],
+            strict=True,
+        )
+    )
     assert rows == seen
     assert view["failures"]["collision"][-1] == 3  # episodes 0, 3 and 6 failed
     assert view["steps"][:2] == [6, 13]  # 5 steps and the closing one, then 6 and 1 more
@@ -55,8 +71,7 @@ def test_a_full_history_halves_and_still_spans_the_whole_life() -> None:
         # the rows stay evenly spaced from the start, one every `stride` episodes
         episodes = history.rows[:, EPISODES]
         assert (episodes == history.stride * np.arange(1, episodes.size + 1)).all()
-    assert history.stride == 16 and history.rows[:, EPISODES].tolist() == [
-        16, 32, 48, 64, 80, 96]
+    assert history.stride == 16 and history.rows[:, EPISODES].tolist() == [16, 32, 48, 64, 80, 96]
     assert history.rows[:, 1].tolist() == [160, 320, 480, 640, 800, 960]  # totals kept
 
 
@@ -111,12 +126,18 @@ def wrong_width(h: dict[str, Any]) -> None:
     h["rows"] = h["rows"][:, :3].copy()
 
 
-@pytest.mark.parametrize("change,field", [
-    (swap_rows, "history.rows"), (off_stride, "history.rows"),
-    (beyond_counters, "history.rows"), (too_many_rows, "history.rows"),
-    (wrong_width, "history.rows"), (lambda h: h.update(stride=3), "history.stride"),
-    (lambda h: h.update(stride=0), "history.stride"),
-])
+@pytest.mark.parametrize(
+    "change,field",
+    [
+        (swap_rows, "history.rows"),
+        (off_stride, "history.rows"),
+        (beyond_counters, "history.rows"),
+        (too_many_rows, "history.rows"),
+        (wrong_width, "history.rows"),
+        (lambda h: h.update(stride=3), "history.stride"),
+        (lambda h: h.update(stride=0), "history.stride"),
+    ],
+)
 def test_a_history_no_model_could_have_is_refused(change: Any, field: str) -> None:
     shield = Shield(cliff_config())
     run_cliff(shield, 6, seed=2)

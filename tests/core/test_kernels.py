@@ -27,8 +27,10 @@ def test_the_pairwise_sum_reads_only_the_first_n_and_is_accurate() -> None:
     assert pairwise_sum(x, 1000) == pytest.approx(100.0, rel=1e-14)  # a naive loop: 1e-13
 
 
-@pytest.mark.parametrize(("x", "y"), [(0.0, 0.0), (1.0, -np.inf), (-np.inf, -np.inf),
-                                      (3.0, 2.0), (-1e300, 5.0), (700.0, 700.5)])
+@pytest.mark.parametrize(
+    ("x", "y"),
+    [(0.0, 0.0), (1.0, -np.inf), (-np.inf, -np.inf), (3.0, 2.0), (-1e300, 5.0), (700.0, 700.5)],
+)
 def test_logaddexp_is_numpys_formula_on_libm(x: float, y: float) -> None:
     if x == y:
         expected = x + math.log(2.0)

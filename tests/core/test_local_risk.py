@@ -75,11 +75,13 @@ def test_an_untried_bin_takes_its_nearest_tried_bin_on_the_safe_side_or_none() -
         value = model.theta[0] @ features(model, np.array([0.5]), b)
         tried[b] = np.clip(value, 0.0, 1.0)
     # criterion 0 is safe towards bin 0: bin 0 has nothing tried on its safe side
-    assert risk[:, 0].tolist() == pytest.approx([0.0, tried[1, 0], tried[1, 0], tried[3, 0],
-                                                 tried[3, 0]])
+    assert risk[:, 0].tolist() == pytest.approx(
+        [0.0, tried[1, 0], tried[1, 0], tried[3, 0], tried[3, 0]]
+    )
     # criterion 1 is safe towards bin 4
-    assert risk[:, 1].tolist() == pytest.approx([tried[1, 1], tried[1, 1], tried[3, 1],
-                                                 tried[3, 1], 0.0])
+    assert risk[:, 1].tolist() == pytest.approx(
+        [tried[1, 1], tried[1, 1], tried[3, 1], tried[3, 1], 0.0]
+    )
     assert model.tried[0].tolist() == [0, 15, 0, 15, 0]
 
 
@@ -92,8 +94,9 @@ def test_bins_safer_than_every_bin_applied_near_the_observation_carry_no_risk_th
     for t in range(200):
         brake = t % 2 == 0
         x = rng.uniform(0.0, 0.3) if brake else rng.uniform(0.6, 1.0)
-        model.learn(0, one_state(), np.array([x]), 1 if brake else 3, 0 if brake else None,
-                    ended=True)
+        model.learn(
+            0, one_state(), np.array([x]), 1 if brake else 3, 0 if brake else None, ended=True
+        )
 
     def model_at(x: float, b: int) -> float:
         return float(np.clip(model.theta[0, 0] @ features(model, np.array([x]), b), 0, 1))
@@ -103,11 +106,11 @@ def test_bins_safer_than_every_bin_applied_near_the_observation_carry_no_risk_th
     model.read(one_state(), np.array([0.1]), SAFE[:1], near)
     assert model_at(0.8, 1) > 0.1  # what the state-wide model says of braking at x = 0.8
     # at x = 0.8 only bin 3 was applied: braking there is untried, so it carries no risk
-    assert far[:, 0].tolist() == pytest.approx([0.0, 0.0, 0.0, model_at(0.8, 3),
-                                                model_at(0.8, 3)])
+    assert far[:, 0].tolist() == pytest.approx([0.0, 0.0, 0.0, model_at(0.8, 3), model_at(0.8, 3)])
     # at x = 0.1 braking was applied: its model answers, and the state's for bin 3
-    assert near[:, 0].tolist() == pytest.approx([0.0, model_at(0.1, 1), model_at(0.1, 1),
-                                                 model_at(0.1, 3), model_at(0.1, 3)])
+    assert near[:, 0].tolist() == pytest.approx(
+        [0.0, model_at(0.1, 1), model_at(0.1, 1), model_at(0.1, 3), model_at(0.1, 3)]
+    )
     assert near[1, 0] > 0.5
 
 
@@ -124,8 +127,12 @@ def test_a_snapshot_without_boxes_restores_with_none_and_a_bad_box_is_refused() 
     boxes = restored.snapshot({})
     assert (boxes["low"] == 1.0).all() and (boxes["high"] == 0.0).all()  # all empty
     assert_same(restored.theta, shield.local_risk.theta)
-    assert_same(Shield.from_snapshot(Shield.from_snapshot(
-        {**data, "local_risk": older}).snapshot()).snapshot()["local_risk"], boxes)
+    assert_same(
+        Shield.from_snapshot(
+            Shield.from_snapshot({**data, "local_risk": older}).snapshot()
+        ).snapshot()["local_risk"],
+        boxes,
+    )
     half = local["low"].copy()
     applied = local["tried"] > 0
     half[applied, 0] = local["high"][applied, 0] + 1.0  # one dimension upside down
@@ -154,8 +161,7 @@ def test_the_risk_follows_the_observation_within_one_state() -> None:
     rng = np.random.default_rng(1)
     for _ in range(400):
         x = rng.uniform(0, 1)
-        model.learn(0, one_state(), np.array([x]), 1, 0 if x < 0.2 else None,
-                    ended=True)
+        model.learn(0, one_state(), np.array([x]), 1, 0 if x < 0.2 else None, ended=True)
     near, far = np.empty((3, 1)), np.empty((3, 1))
     model.read(one_state(), np.array([0.05]), SAFE[:1], near)
     model.read(one_state(), np.array([0.9]), SAFE[:1], far)
@@ -171,8 +177,11 @@ def test_the_shield_learns_to_refuse_the_action_that_crashed() -> None:
     assert decision.revised and decision.action is not None and decision.action < 1.9
     assert decision.risk["collision"] > 0.0 and decision.candidates
     later = crash_world(shield, 50, seed=2)
-    assert later < crash_world(Shield(ShieldConfig.from_dict(
-        {**LOCAL, "reviser": {"activate_after_episodes": 10**6}})), 50, seed=2)
+    assert later < crash_world(
+        Shield(ShieldConfig.from_dict({**LOCAL, "reviser": {"activate_after_episodes": 10**6}})),
+        50,
+        seed=2,
+    )
 
 
 def test_a_model_with_pending_steps_round_trips_and_decides_alike() -> None:
@@ -214,15 +223,18 @@ def test_a_stream_that_ends_frees_its_slot_and_the_next_stream_starts_empty() ->
     assert_same(copy.snapshot(), shield.snapshot())
 
 
-@pytest.mark.parametrize(("damage", "field"), [
-    ("theta", "local_risk.theta"),
-    ("tried", "local_risk.tried"),
-    ("cov", "local_risk.cov"),
-    ("lengths", "local_risk.lengths"),
-    ("index", "local_risk.index"),
-    ("stream", "local_risk.streams"),
-    ("twice", "local_risk.streams"),
-])
+@pytest.mark.parametrize(
+    ("damage", "field"),
+    [
+        ("theta", "local_risk.theta"),
+        ("tried", "local_risk.tried"),
+        ("cov", "local_risk.cov"),
+        ("lengths", "local_risk.lengths"),
+        ("index", "local_risk.index"),
+        ("stream", "local_risk.streams"),
+        ("twice", "local_risk.streams"),
+    ],
+)
 def test_a_damaged_local_model_is_refused_naming_its_part(damage: str, field: str) -> None:
     shield = Shield(ShieldConfig.from_dict(LOCAL))
     crash_world(shield, 10, seed=4)
@@ -257,8 +269,12 @@ def test_extreme_observations_leave_every_risk_a_probability() -> None:
     rng = np.random.default_rng(5)
     for t in range(300):
         big = [float(v) for v in rng.choice([-1e12, 1e12, 0.0, 1e-300], 3)]  # the bounds
-        decision = shield.step(big, float(rng.uniform(-2, 2)), done=t % 20 == 19,
-                               event="collision" if t % 40 == 39 else None)
+        decision = shield.step(
+            big,
+            float(rng.uniform(-2, 2)),
+            done=t % 20 == 19,
+            event="collision" if t % 40 == 39 else None,
+        )
         for value in decision.risk.values():
             assert 0.0 <= value <= 1.0
     assert shield.local_risk is not None and np.isfinite(shield.local_risk.theta).all()

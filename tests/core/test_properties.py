@@ -24,8 +24,12 @@ from tests.utils import assert_same
 
 finite = st.floats(0.0, 1e6, allow_nan=False, allow_infinity=False)
 observation = st.tuples(st.floats(0, 32), st.floats(0, 210), st.floats(0, 32))
-step = st.tuples(observation, st.floats(-2.5, 2.5), st.booleans(),
-                 st.sampled_from([None, "collision", "large_distance"]))
+step = st.tuples(
+    observation,
+    st.floats(-2.5, 2.5),
+    st.booleans(),
+    st.sampled_from([None, "collision", "large_distance"]),
+)
 streams = st.lists(step, min_size=1, max_size=60)
 
 
@@ -37,8 +41,11 @@ def feed(shield: Shield, steps: list) -> list:  # type: ignore[type-arg]
     return out
 
 
-@given(arrays(np.float64, st.integers(1, 40), elements=finite), st.integers(1, 50),
-       st.floats(1e-4, 10.0))
+@given(
+    arrays(np.float64, st.integers(1, 40), elements=finite),
+    st.integers(1, 50),
+    st.floats(1e-4, 10.0),
+)
 def test_beliefs_sum_to_one(d2: np.ndarray, k: int, var: float) -> None:
     belief = recognise(d2, np.full(d2.shape, var), k)
     assert np.isclose(belief.prob.sum(), 1.0)
@@ -47,9 +54,11 @@ def test_beliefs_sum_to_one(d2: np.ndarray, k: int, var: float) -> None:
 
 
 ops = st.lists(
-    st.one_of(st.just("grow"),
-              st.tuples(st.integers(0, 2), st.integers(0, 10**6), st.integers(0, 10**6))),
-    min_size=1, max_size=40,
+    st.one_of(
+        st.just("grow"), st.tuples(st.integers(0, 2), st.integers(0, 10**6), st.integers(0, 10**6))
+    ),
+    min_size=1,
+    max_size=40,
 )
 
 
@@ -69,10 +78,8 @@ def play(op: object, *models: TransitionModel) -> tuple[int, Belief, Belief] | N
     return a, tau, gamma
 
 
-@given(ops, st.sampled_from(["prior", "zero_uniform", "zero_identity"]),
-       st.floats(0.001, 0.5))
-def test_tpm_rows_stay_distributions_and_forms_agree(ops_list: list, mode: str,
-                                                     lr: float) -> None:  # type: ignore[type-arg]
+@given(ops, st.sampled_from(["prior", "zero_uniform", "zero_identity"]), st.floats(0.001, 0.5))
+def test_tpm_rows_stay_distributions_and_forms_agree(ops_list: list, mode: str, lr: float) -> None:  # type: ignore[type-arg]
     cfg = TransitionConfig(learning_rate=lr, expansion=mode)  # type: ignore[arg-type]
     lazy, dense = LazyTransitions(3, cfg, 100), DenseTransitions(3, cfg)
     F, F_o = [np.zeros((0, 0))] * 3, [np.zeros(0)] * 3
@@ -94,10 +101,14 @@ def test_tpm_rows_stay_distributions_and_forms_agree(ops_list: list, mode: str,
 
 
 @pytest.mark.slow  # Hypothesis: seconds
-@given(ops, st.sampled_from(["prior", "zero_uniform", "zero_identity"]),
-       st.lists(st.integers(0, 40), max_size=3))
+@given(
+    ops,
+    st.sampled_from(["prior", "zero_uniform", "zero_identity"]),
+    st.lists(st.integers(0, 40), max_size=3),
+)
 def test_lazy_scales_kept_per_row_equal_a_fresh_computation(
-        ops_list: list, mode: str, resets: list[int]) -> None:  # type: ignore[type-arg]
+    ops_list: list, mode: str, resets: list[int]
+) -> None:  # type: ignore[type-arg]
     """The row scales that learning updates in place are what a restore computes anew."""
     cfg = TransitionConfig(expansion=mode, on_replace="reset")  # type: ignore[arg-type]
     lazy = LazyTransitions(3, cfg, 100)
@@ -109,15 +120,21 @@ def test_lazy_scales_kept_per_row_equal_a_fresh_computation(
     belief = top_k(np.random.default_rng(0).random(lazy.n_states), 4)
     for a in range(3):
         for transpose in (True, False):
-            np.testing.assert_array_equal(fresh.predict(belief, a, transpose),
-                                          lazy.predict(belief, a, transpose))
+            np.testing.assert_array_equal(
+                fresh.predict(belief, a, transpose), lazy.predict(belief, a, transpose)
+            )
         np.testing.assert_array_equal(fresh.row_mass(a), lazy.row_mass(a))
 
 
-@given(ops, st.sampled_from(["prior", "zero_uniform", "zero_identity"]), st.integers(1, 6),
-       st.integers(0, 10**6))
+@given(
+    ops,
+    st.sampled_from(["prior", "zero_uniform", "zero_identity"]),
+    st.integers(1, 6),
+    st.integers(0, 10**6),
+)
 def test_the_marginal_step_of_every_action_at_once_is_their_mean_bit_for_bit(
-        ops_list: list, mode: str, k: int, seed: int) -> None:  # type: ignore[type-arg]
+    ops_list: list, mode: str, k: int, seed: int
+) -> None:  # type: ignore[type-arg]
     """The two-step prediction's one pass over all actions gives the numbers of Eq. 7 as
     written (Eq. 5 per action, summed in action order), so that runs do not change with it;
     and the dense backend's marginal within round-off."""
@@ -129,8 +146,9 @@ def test_the_marginal_step_of_every_action_at_once_is_their_mean_bit_for_bit(
     for transpose in (True, False):
         marginal = lazy.predict_marginal(belief, transpose)
         np.testing.assert_array_equal(marginal, marginal_by_action(lazy, belief, transpose))
-        np.testing.assert_allclose(marginal, dense.predict_marginal(belief, transpose),
-                                   rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(
+            marginal, dense.predict_marginal(belief, transpose), rtol=1e-9, atol=1e-12
+        )
 
 
 @pytest.mark.slow  # Hypothesis: seconds
@@ -177,10 +195,12 @@ def test_learn_false_and_inputs_are_left_untouched(steps: list, z: tuple, a: flo
     np.testing.assert_array_equal(obs, np.array(z))  # the caller's array is not mutated
 
 
-@given(st.tuples(st.floats(-50, 50), st.floats(-20, 400), st.floats(-50, 50)),
-       st.floats(0.5, 100.0))
+@given(
+    st.tuples(st.floats(-50, 50), st.floats(-20, 400), st.floats(-50, 50)), st.floats(0.5, 100.0)
+)
 def test_a_knee_maps_observations_one_to_one_and_stretches_the_close_range(
-        z: tuple[float, float, float], knee: float) -> None:
+    z: tuple[float, float, float], knee: float
+) -> None:
     linear = Shield(ShieldConfig.from_dict({"observation": {"knee": []}}))
     curved = Shield(ShieldConfig.from_dict({"observation": {"knee": [0.0, knee, 0.0]}}))
     x = np.array(z)

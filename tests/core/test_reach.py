@@ -26,8 +26,7 @@ def test_the_dynamics_are_weighted_ridge_least_squares_on_the_changes() -> None:
         phi = np.array([1.0, *before, u])
         after = before + truth @ phi + rng.normal(0, 0.01, 2)
         # the second state's weight is below the floor: it learns nothing
-        reach.learn(dynamics, cov, peak, np.array([0, 1]), np.array([weight, 1e-4]), phi,
-                    after)
+        reach.learn(dynamics, cov, peak, np.array([0, 1]), np.array([weight, 1e-4]), phi, after)
         rows.append(phi)
         changes.append(after - before)
         weights.append(weight)
@@ -47,8 +46,9 @@ def test_the_peak_is_the_largest_error_of_learned_dynamics_and_fades() -> None:
     def learn(noise: float) -> None:
         before, u = rng.uniform(0, 1, 1), rng.uniform(0, 1)
         after = before + 0.1 - 0.2 * u + noise
-        reach.learn(dynamics, cov, peak, np.array([0]), np.array([1.0]),
-                    np.array([1.0, *before, u]), after)
+        reach.learn(
+            dynamics, cov, peak, np.array([0]), np.array([1.0]), np.array([1.0, *before, u]), after
+        )
 
     learn(5.0)  # a first error, before the dynamics are learned: it does not count
     assert peak[0] == 0.0 and cov[0, 0, 0] >= reach.SETTLED
@@ -71,16 +71,44 @@ def test_a_path_towards_a_failure_is_risky_and_one_away_from_it_is_not() -> None
     points[0, 0, 0] = 0.15
     counts = np.array([[1, 1]])
     out = np.empty((2, 1))
-    for safe, expected in ((np.array([-1]), [0.5, 0.0]),  # safe: slow (down from 0.6)
-                           (np.array([1]), [0.0, 0.0])):  # safe: fast, back up after one
-        reach.risk(dynamics, peak, extent, np.array([0]), np.array([1.0]), np.array([0.5]),
-                   np.array([0.25, 0.75]), safe, points, counts, reach.no_bounds(1), 3, 0.1,
-                   out)
+    for safe, expected in (
+        (np.array([-1]), [0.5, 0.0]),  # safe: slow (down from 0.6)
+        (np.array([1]), [0.0, 0.0]),
+    ):  # safe: fast, back up after one
+        reach.risk(
+            dynamics,
+            peak,
+            extent,
+            np.array([0]),
+            np.array([1.0]),
+            np.array([0.5]),
+            np.array([0.25, 0.75]),
+            safe,
+            points,
+            counts,
+            reach.no_bounds(1),
+            3,
+            0.1,
+            out,
+        )
         # slow first, then 3 steps: 0.4, 0.3, 0.2 (0.05 from the failure: half the radius)
         assert out[:, 0] == pytest.approx(expected)
-    reach.risk(dynamics, peak, extent, np.array([0]), np.array([1.0]), np.array([0.5]),
-               np.array([0.25, 0.75]), np.array([-1]), points, np.array([[0, 0]]),
-               reach.no_bounds(1), 3, 0.1, out)
+    reach.risk(
+        dynamics,
+        peak,
+        extent,
+        np.array([0]),
+        np.array([1.0]),
+        np.array([0.5]),
+        np.array([0.25, 0.75]),
+        np.array([-1]),
+        points,
+        np.array([[0, 0]]),
+        reach.no_bounds(1),
+        3,
+        0.1,
+        out,
+    )
     assert not out.any()  # no failure seen and no bound: no risk
 
 
@@ -90,24 +118,40 @@ def test_a_path_towards_a_failure_is_risky_and_one_away_from_it_is_not() -> None
 CLOSING = np.array([[[0.0, 0.0, -1.0, 0.0], [-0.1, 0.0, 0.0, 0.2]]])
 
 
-@pytest.mark.parametrize(("peak", "expected"), [
-    # no disturbance: slow, h 0.2, 0.15, 0.15 (v stays at the 0 seen, not below): never
-    # (tau 6); fast: h 0.2, 0.05, then -0.05 halfway through the third step, tau 2.5
-    (0.0, [0.0, (6 - 2.5) / 6]),
-    # the speed may rise by 0.05 more a step: slow, v within [0, 0.1], so the gap's low end
-    # goes 0.2, 0.1, 0.0: tau 3; fast, v within [0.1, 0.2]: 0.2, then 0.0, tau 2. Both
-    # cross: only the fast bin's earlier crossing counts, by the step it comes sooner
-    (0.05, [0.0, (3 - 2) / 6]),
-])
+@pytest.mark.parametrize(
+    ("peak", "expected"),
+    [
+        # no disturbance: slow, h 0.2, 0.15, 0.15 (v stays at the 0 seen, not below): never
+        # (tau 6); fast: h 0.2, 0.05, then -0.05 halfway through the third step, tau 2.5
+        (0.0, [0.0, (6 - 2.5) / 6]),
+        # the speed may rise by 0.05 more a step: slow, v within [0, 0.1], so the gap's low end
+        # goes 0.2, 0.1, 0.0: tau 3; fast, v within [0.1, 0.2]: 0.2, then 0.0, tau 2. Both
+        # cross: only the fast bin's earlier crossing counts, by the step it comes sooner
+        (0.05, [0.0, (3 - 2) / 6]),
+    ],
+)
 def test_a_bound_fails_an_action_when_the_box_of_its_worst_cases_reaches_it(
-        peak: float, expected: list[float]) -> None:
+    peak: float, expected: list[float]
+) -> None:
     bounds = reach.no_bounds(1)
     bounds[0, 0], bounds[0, 1] = 0, 0.0
     out = np.empty((2, 1))
-    reach.risk(CLOSING, np.array([0.0, peak]), np.array([[0.0, 0.0], [1.0, 1.0]]),
-               np.array([0]), np.array([1.0]), np.array([0.3, 0.1]), np.array([0.25, 0.75]),
-               np.array([-1]), np.zeros((1, reach.MAX_POINTS, 2)), np.array([[0, 0]]), bounds,
-               5, 0.1, out)
+    reach.risk(
+        CLOSING,
+        np.array([0.0, peak]),
+        np.array([[0.0, 0.0], [1.0, 1.0]]),
+        np.array([0]),
+        np.array([1.0]),
+        np.array([0.3, 0.1]),
+        np.array([0.25, 0.75]),
+        np.array([-1]),
+        np.zeros((1, reach.MAX_POINTS, 2)),
+        np.array([[0, 0]]),
+        bounds,
+        5,
+        0.1,
+        out,
+    )
     assert out[:, 0] == pytest.approx(expected)
 
 
@@ -124,8 +168,7 @@ def test_the_box_stays_where_the_observation_was_seen() -> None:
 
     def when(extent: np.ndarray, start: np.ndarray) -> float:
         out = np.empty(1)
-        reach.crossings(model, peak, extent, start, np.array([0.25]), 0.25, 0, 0.0, np.inf, 5,
-                        out)
+        reach.crossings(model, peak, extent, start, np.array([0.25]), 0.25, 0, 0.0, np.inf, 5, out)
         return float(out[0])
 
     assert when(seen, z) == 6.0
@@ -149,12 +192,36 @@ def test_the_reach_kernel_gives_the_reference_rollouts(seed: int) -> None:
     bounds, b = reach.no_bounds(2), int(rng.integers(d))
     bounds[0, 0], bounds[0, 1] = b, 0.1
     out = np.empty((q, 2))
-    reach.risk(dynamics, peak, extent, index, prob, z, midpoints, SAFE, points,
-               np.array([[5, 5], [5, 5]]), bounds, horizon, radius, out)
+    reach.risk(
+        dynamics,
+        peak,
+        extent,
+        index,
+        prob,
+        z,
+        midpoints,
+        SAFE,
+        points,
+        np.array([[5, 5], [5, 5]]),
+        bounds,
+        horizon,
+        radius,
+        out,
+    )
     for c, safe_bin in enumerate((0, q - 1)):
-        expected = reference.reach(dynamics[index], prob, z, midpoints, safe_bin,
-                                   points[c, :5], horizon, radius, peak, extent,
-                                   (b, 0.1, np.inf) if c == 0 else None)
+        expected = reference.reach(
+            dynamics[index],
+            prob,
+            z,
+            midpoints,
+            safe_bin,
+            points[c, :5],
+            horizon,
+            radius,
+            peak,
+            extent,
+            (b, 0.1, np.inf) if c == 0 else None,
+        )
         assert out[:, c] == pytest.approx(expected, abs=1e-12)
 
 
@@ -180,19 +247,28 @@ def test_a_shield_learns_dynamics_and_failure_points_and_snapshots_them() -> Non
     assert_same(restored.snapshot(), shield.snapshot())
     for t in range(50):
         observation, action = [10.0 + t % 7, 20.0 - t % 5, 12.0], float(t % 5) - 2
-        assert (restored.step(observation, action).to_dict()
-                == shield.step(observation, action).to_dict())
+        assert (
+            restored.step(observation, action).to_dict()
+            == shield.step(observation, action).to_dict()
+        )
 
 
 def test_bounds_lie_in_the_clustering_space() -> None:
     shield = Shield(ShieldConfig())  # the collision's bound: a headway of 0
     assert shield.local_risk is not None
     assert shield.local_risk.bounds.tolist() == [[1.0, 0.0, np.inf], [-1.0, -np.inf, np.inf]]
-    both = [{"name": "near", "direction": "decrease", "bound": {"observation": "headway",
-                                                                "below": 5.0, "above": 200.0}}]
+    both = [
+        {
+            "name": "near",
+            "direction": "decrease",
+            "bound": {"observation": "headway", "below": 5.0, "above": 200.0},
+        }
+    ]
     shield = Shield(ShieldConfig.from_dict({"criteria": both}))
-    z = shield.normalise(np.array([0.0, 5.0, 0.0]))[1], shield.normalise(
-        np.array([0.0, 200.0, 0.0]))[1]
+    z = (
+        shield.normalise(np.array([0.0, 5.0, 0.0]))[1],
+        shield.normalise(np.array([0.0, 200.0, 0.0]))[1],
+    )
     assert shield.local_risk is not None
     assert shield.local_risk.bounds.tolist() == [[1.0, z[0], z[1]]]
 
@@ -245,8 +321,15 @@ def test_a_snapshot_with_a_bad_failure_point_count_is_refused() -> None:
     assert error.value.field == "local_risk.point_counts"
 
 
-@pytest.mark.parametrize("risk_section", [{"reach_horizon": -1}, {"reach_horizon": 5000},
-                                          {"reach_radius": 0.0}, {"reach_radius": float("nan")}])
+@pytest.mark.parametrize(
+    "risk_section",
+    [
+        {"reach_horizon": -1},
+        {"reach_horizon": 5000},
+        {"reach_radius": 0.0},
+        {"reach_radius": float("nan")},
+    ],
+)
 def test_bad_reach_settings_are_refused_naming_the_field(risk_section: dict) -> None:
     with pytest.raises(InvalidConfig) as error:
         ShieldConfig.from_dict({"risk": risk_section})
@@ -261,25 +344,65 @@ def test_a_configuration_stored_before_the_reach_loads_without_it() -> None:
     assert ShieldConfig.from_stored(ShieldConfig().to_dict()).risk.reach_horizon == 40
 
 
-@pytest.mark.parametrize(("criteria", "observation", "field"), [
-    ([{"name": "c", "direction": "decrease", "bound": {"observation": "speed", "below": 0}}],
-     {}, "criteria.0.bound.observation"),
-    ([{"name": "c", "direction": "decrease", "bound": {"observation": "headway"}}],
-     {}, "criteria.0.bound.below"),
-    ([{"name": "c", "direction": "decrease",
-       "bound": {"observation": "headway", "below": 5, "above": 5}}], {},
-     "criteria.0.bound.above"),
-    ([{"name": "c", "direction": "decrease",
-       "bound": {"observation": "headway", "below": "near"}}], {}, "criteria.0.bound.below"),
-    ([{"name": "c", "direction": "decrease", "bound": {"observation": "headway", "below": 0}}],
-     {"cluster_raw": False,
-      "features": [{"name": "gap", "weights": [0, 1, 0], "low": 0, "high": 50}]},
-     "criteria.0.bound"),
-    (None, {"names": ["x"], "low": [0], "high": [1], "knee": []},
-     "criteria.0.bound.observation"),  # the default criteria bound the headway
-])
-def test_bad_bounds_are_refused_naming_the_field(criteria: list | None, observation: dict,
-                                                 field: str) -> None:
+@pytest.mark.parametrize(
+    ("criteria", "observation", "field"),
+    [
+        (
+            [{"name": "c", "direction": "decrease", "bound": {"observation": "speed", "below": 0}}],
+            {},
+            "criteria.0.bound.observation",
+        ),
+        (
+            [{"name": "c", "direction": "decrease", "bound": {"observation": "headway"}}],
+            {},
+            "criteria.0.bound.below",
+        ),
+        (
+            [
+                {
+                    "name": "c",
+                    "direction": "decrease",
+                    "bound": {"observation": "headway", "below": 5, "above": 5},
+                }
+            ],
+            {},
+            "criteria.0.bound.above",
+        ),
+        (
+            [
+                {
+                    "name": "c",
+                    "direction": "decrease",
+                    "bound": {"observation": "headway", "below": "near"},
+                }
+            ],
+            {},
+            "criteria.0.bound.below",
+        ),
+        (
+            [
+                {
+                    "name": "c",
+                    "direction": "decrease",
+                    "bound": {"observation": "headway", "below": 0},
+                }
+            ],
+            {
+                "cluster_raw": False,
+                "features": [{"name": "gap", "weights": [0, 1, 0], "low": 0, "high": 50}],
+            },
+            "criteria.0.bound",
+        ),
+        (
+            None,
+            {"names": ["x"], "low": [0], "high": [1], "knee": []},
+            "criteria.0.bound.observation",
+        ),  # the default criteria bound the headway
+    ],
+)
+def test_bad_bounds_are_refused_naming_the_field(
+    criteria: list | None, observation: dict, field: str
+) -> None:
     data: dict = {"observation": observation}
     if criteria is not None:
         data["criteria"] = criteria

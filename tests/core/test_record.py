@@ -35,8 +35,7 @@ def test_a_failure_settles_every_pending_step_as_failed_and_an_old_step_as_not()
     assert record.counts[:, PASSED_FAILED].tolist() == [0, 0]
     record.settle("a", failed=True)
     row0, row1 = record.counts
-    assert (row0[PASSED], row0[PASSED_FAILED], row0[REVISED], row0[REVISED_FAILED]) == (
-        2, 1, 1, 1)
+    assert (row0[PASSED], row0[PASSED_FAILED], row0[REVISED], row0[REVISED_FAILED]) == (2, 1, 1, 1)
     assert (row1[PASSED], row1[REVISED], row1[REVISED_FAILED]) == (1, 2, 2)
     assert row1[REVISED_FAILURES] == 1 and row0[REVISED_FAILURES] == 1  # one event each
 
@@ -67,8 +66,9 @@ def test_it_backs_off_only_where_revisions_fail_clearly_more_often_than_passes()
 
 def test_the_excess_counts_a_window_of_steps_as_one_sample() -> None:
     # the same rates from ten times the steps within ten-step windows: the same evidence
-    assert excess(400, 200, 4000, 200, 10) == pytest.approx(excess(40, 20, 400, 20, 1),
-                                                            rel=0.01)  # (the prior aside)
+    assert excess(400, 200, 4000, 200, 10) == pytest.approx(
+        excess(40, 20, 400, 20, 1), rel=0.01
+    )  # (the prior aside)
     assert excess(5, 5, 5, 0, 1) > 0 > excess(5, 0, 5, 5, 1)
 
 
@@ -81,8 +81,12 @@ def backing_off_shield() -> Shield:
         for t in range(30):
             x = [float(rng.uniform(0, 1)), 5.0, 1.0]
             decision = shield.step(x, float(rng.uniform(-2, 2)))
-            if decision.revised or t == 10 and decision.action is not None \
-                    and decision.action > 1.5:
+            if (
+                decision.revised
+                or t == 10
+                and decision.action is not None
+                and decision.action > 1.5
+            ):
                 shield.step(x, None, done=True, event="collision")
                 break
         else:
@@ -94,22 +98,25 @@ def test_a_shield_whose_revisions_fail_backs_off_says_so_and_keeps_its_record() 
     shield = backing_off_shield()
     counts = shield.record.counts
     assert counts[:, REVISED_FAILED].sum() > 0 and shield.record.backed_off().any()
-    backed = [shield.step([float(x), 5.0, 1.0], 2.0, learn=False)
-              for x in np.linspace(0, 1, 21)]
+    backed = [shield.step([float(x), 5.0, 1.0], 2.0, learn=False) for x in np.linspace(0, 1, 21)]
     held = [d for d in backed if d.reason == "backed_off"]
-    assert held and all(d.action == 2.0 and not d.revised and d.suggested != 2.0
-                        and d.verdict != "ok" for d in held)
+    assert held and all(
+        d.action == 2.0 and not d.revised and d.suggested != 2.0 and d.verdict != "ok" for d in held
+    )
     restored = Shield.from_snapshot(shield.snapshot())
     assert_same(restored.snapshot()["record"], shield.snapshot()["record"])
     assert np.array_equal(restored.record.backed_off(), shield.record.backed_off())
 
 
-@pytest.mark.parametrize(("change", "field"), [
-    (lambda r: r["counts"].__setitem__((0, REVISED_FAILED), 10**6), "record.counts"),
-    (lambda r: r.__setitem__("counts", r["counts"][:, :2]), "record.counts"),
-    (lambda r: r.__setitem__("streams", ["nobody"]), "record.streams"),
-    (lambda r: r["states"].__setitem__(slice(None), 10**6), "record.states"),
-])
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        (lambda r: r["counts"].__setitem__((0, REVISED_FAILED), 10**6), "record.counts"),
+        (lambda r: r.__setitem__("counts", r["counts"][:, :2]), "record.counts"),
+        (lambda r: r.__setitem__("streams", ["nobody"]), "record.streams"),
+        (lambda r: r["states"].__setitem__(slice(None), 10**6), "record.states"),
+    ],
+)
 def test_a_damaged_record_is_refused_naming_its_field(change: object, field: str) -> None:
     shield = Shield(ShieldConfig())
     for t in range(30):

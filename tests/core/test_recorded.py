@@ -48,10 +48,16 @@ def test_a_format_3_snapshot_of_the_local_model_restores_what_it_holds_and_goes_
         assert_same(now[key], old[key], key)
     # its counters, and the failures by kind (counted since) as its states counted them
     failures = now["counters"]["failures"]
-    assert_same({k: v for k, v in now["counters"].items() if k != "failures"}, old["counters"],
-                "counters")
-    assert failures == dict(zip(("collision", "large_distance"),
-                                old["flags"]["failures"].sum(axis=0).tolist(), strict=True))
+    assert_same(
+        {k: v for k, v in now["counters"].items() if k != "failures"}, old["counters"], "counters"
+    )
+    assert failures == dict(
+        zip(
+            ("collision", "large_distance"),
+            old["flags"]["failures"].sum(axis=0).tolist(),
+            strict=True,
+        )
+    )
     assert failures["collision"] > 0 and now["history"]["rows"].shape[0] == 1
     for key, value in old["local_risk"].items():
         assert_same(now["local_risk"][key], value, f"local_risk.{key}")

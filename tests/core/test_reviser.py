@@ -78,7 +78,8 @@ def test_alg2_accepts_a_large_distance_while_fleeing_a_collision() -> None:
 def test_alg2_fixed_steps_back_when_the_upward_search_meets_a_collision() -> None:
     table = {6: LARGE, 7: COLLISION}
     assert search(5, LARGE, DIRECTIONS, 20, False, table.__getitem__) == (
-        6, [(6, LARGE), (7, COLLISION)]
+        6,
+        [(6, LARGE), (7, COLLISION)],
     )
     # the literal loop stops on the action predicted to crash
     assert search(5, LARGE, DIRECTIONS, 20, True, table.__getitem__)[0] == 7

@@ -35,11 +35,23 @@ def test_a_criterion_without_a_direction_keeps_its_risks_as_learned() -> None:
     assert by_bin[:, 0].tolist() == [0.3, 0.0, 0.2]
 
 
-def verdicts_of(by_bin: np.ndarray, reached: np.ndarray | None, proposed: int,
-                threshold: float = 0.0, margin: float = 0.001) -> tuple[float, int, int, bool]:
+def verdicts_of(
+    by_bin: np.ndarray,
+    reached: np.ndarray | None,
+    proposed: int,
+    threshold: float = 0.0,
+    margin: float = 0.001,
+) -> tuple[float, int, int, bool]:
     verdicts = np.empty(by_bin.shape[0], dtype=np.int64)
-    return decide(by_bin.copy(), np.zeros_like(by_bin) if reached is None else reached,
-                  reached is not None, proposed, threshold, margin, verdicts)
+    return decide(
+        by_bin.copy(),
+        np.zeros_like(by_bin) if reached is None else reached,
+        reached is not None,
+        proposed,
+        threshold,
+        margin,
+        verdicts,
+    )
 
 
 def test_the_decision_reads_the_total_risk_of_every_criterion_together() -> None:
@@ -58,8 +70,7 @@ def test_a_proposal_within_the_margin_of_the_least_risk_is_kept() -> None:
     assert verdicts_of(by_bin, None, 2, threshold=0.8)[2:] == (2, True)  # under the threshold
 
 
-def test_where_no_action_is_safe_the_least_risky_nearest_applies_never_an_extreme_by_rule(
-        ) -> None:
+def test_where_no_action_is_safe_the_least_risky_nearest_applies_never_an_extreme_by_rule() -> None:
     # every action risks a failure; the least (bin 2) is in the middle, not at an end
     by_bin = np.array([[0.9, 0.0], [0.0, 0.7], [0.4, 0.0], [0.8, 0.0], [0.95, 0.0]])
     assert verdicts_of(by_bin, None, 4)[2:] == (2, False)
@@ -126,27 +137,38 @@ def test_the_shield_learns_to_refuse_the_action_that_crashed() -> None:
     assert decision.risk["collision"] > 0.05 and decision.candidates
     assert decision.candidates[-1].verdict == "ok" and decision.candidates[-1].risk is not None
     later = crash_world(shield, 50, seed=2)
-    assert later < crash_world(Shield(ShieldConfig.from_dict(
-        {"reviser": {**RISK, "activate_after_episodes": 10**6}})), 50, seed=2) / 2
+    assert (
+        later
+        < crash_world(
+            Shield(ShieldConfig.from_dict({"reviser": {**RISK, "activate_after_episodes": 10**6}})),
+            50,
+            seed=2,
+        )
+        / 2
+    )
 
 
-@pytest.mark.parametrize(("event", "safe_end"), [("collision", -2.0),
-                                                  ("large_distance", 2.0)])
+@pytest.mark.parametrize(("event", "safe_end"), [("collision", -2.0), ("large_distance", 2.0)])
 def test_a_revision_applies_the_bins_midpoint_and_an_end_bin_the_range_end(
-        event: str, safe_end: float) -> None:
+    event: str, safe_end: float
+) -> None:
     # a point that fails whenever it moves towards the criterion's side: revisions go to the
     # safe side, some of them to its end bin, which applies the end of the range (-2 or 2, the
     # hardest braking or pushing), not its midpoint (-1.9 or 1.9); the others their midpoints.
     # Without the reach: its paths all run through the failures seen at this one observation,
     # and where no bin avoids a failure the reach sends every revision to the end bin.
-    shield = Shield(ShieldConfig.from_dict({"reviser": {**RISK, "activate_after_episodes": 20},
-                                            "risk": {"reach_horizon": 0}}))
+    shield = Shield(
+        ShieldConfig.from_dict(
+            {"reviser": {**RISK, "activate_after_episodes": 20}, "risk": {"reach_horizon": 0}}
+        )
+    )
     rng = np.random.default_rng(3)
     revised = []
     for _ in range(60):
         for _ in range(20):
-            decision = shield.step([25.0 + rng.normal(0, 0.1), 20.0, 10.0],
-                                   float(rng.uniform(-2, 2)))
+            decision = shield.step(
+                [25.0 + rng.normal(0, 0.1), 20.0, 10.0], float(rng.uniform(-2, 2))
+            )
             assert decision.action is not None
             revised += [decision] if decision.revised else []
             if decision.action * safe_end < 0:
@@ -164,29 +186,41 @@ def test_the_risk_reviser_is_deterministic_and_round_trips_its_snapshot() -> Non
     a, b = Shield(config), Shield(config)
     crash_world(a, 30, seed=3)
     crash_world(b, 30, seed=3)
-    assert a.step([25.0, 20.0, 10.0], 1.5, stream="x") == b.step([25.0, 20.0, 10.0], 1.5,
-                                                                   stream="x")
+    assert a.step([25.0, 20.0, 10.0], 1.5, stream="x") == b.step(
+        [25.0, 20.0, 10.0], 1.5, stream="x"
+    )
     restored = Shield.from_snapshot(a.snapshot())
     for speed in (5.0, 22.0, 29.0):
         assert restored.step([speed, 20.0, 10.0], 1.5, stream="x") == a.step(
-            [speed, 20.0, 10.0], 1.5, stream="x")
+            [speed, 20.0, 10.0], 1.5, stream="x"
+        )
     assert restored.local_risk is not None and a.local_risk is not None
     assert np.array_equal(restored.local_risk.theta, a.local_risk.theta)
 
 
-@pytest.mark.parametrize(("overrides", "field"), [
-    ({"risk": {"horizon": 0}}, "risk.horizon"),
-    ({"risk": {"threshold": 1.5}}, "risk.threshold"),
-    ({"risk": {"model": "counts"}}, "risk.model"),  # removed: an unknown field now
-    ({"reviser": {"method": "oracle"}}, "reviser.method"),
-    ({"observation": {"features": [{"name": "x", "weights": [1], "low": 0, "high": 1}]}},
-     "observation.features.0.weights"),
-    ({"observation": {"cluster_raw": False}}, "observation.cluster_raw"),
-    ({"observation": {"features": [{"name": "headway", "weights": [0, 1, 0], "low": 0,
-                                    "high": 1}]}}, "observation.features"),
-])
-def test_bad_risk_configurations_name_their_field(overrides: dict[str, object],
-                                                  field: str) -> None:
+@pytest.mark.parametrize(
+    ("overrides", "field"),
+    [
+        ({"risk": {"horizon": 0}}, "risk.horizon"),
+        ({"risk": {"threshold": 1.5}}, "risk.threshold"),
+        ({"risk": {"model": "counts"}}, "risk.model"),  # removed: an unknown field now
+        ({"reviser": {"method": "oracle"}}, "reviser.method"),
+        (
+            {"observation": {"features": [{"name": "x", "weights": [1], "low": 0, "high": 1}]}},
+            "observation.features.0.weights",
+        ),
+        ({"observation": {"cluster_raw": False}}, "observation.cluster_raw"),
+        (
+            {
+                "observation": {
+                    "features": [{"name": "headway", "weights": [0, 1, 0], "low": 0, "high": 1}]
+                }
+            },
+            "observation.features",
+        ),
+    ],
+)
+def test_bad_risk_configurations_name_their_field(overrides: dict[str, object], field: str) -> None:
     with pytest.raises(InvalidConfig) as error:
         ShieldConfig.from_dict(overrides)
     assert error.value.field == field
@@ -194,17 +228,28 @@ def test_bad_risk_configurations_name_their_field(overrides: dict[str, object],
 
 def test_features_are_clustered_beside_or_instead_of_the_observation() -> None:
     closing = {"name": "closing", "weights": [1, 0, -1], "low": -10, "high": 10}
-    ratio = {"name": "time_headway", "weights": [0, 1, 0], "divide_by": [1, 0, 0],
-             "floor": 1.0, "low": 0, "high": 4}
+    ratio = {
+        "name": "time_headway",
+        "weights": [0, 1, 0],
+        "divide_by": [1, 0, 0],
+        "floor": 1.0,
+        "low": 0,
+        "high": 4,
+    }
     beside = Shield(ShieldConfig.from_dict({"observation": {"features": [closing, ratio]}}))
     z = beside.normalise(np.array([20.0, 30.0, 15.0]))
     assert z.shape == (5,)
     assert z[3] == pytest.approx((5 + 10) / 20) and z[4] == pytest.approx(1.5 / 4)
     assert beside.normalise(np.array([0.0, 30.0, 0.0]))[4] == 1.0  # 30 / max(0, 1), clipped
-    unbounded = [{"name": "collision", "direction": "decrease"},  # no headway to bound
-                 {"name": "large_distance", "direction": "increase"}]
-    alone = Shield(ShieldConfig.from_dict(
-        {"observation": {"features": [closing], "cluster_raw": False}, "criteria": unbounded}))
+    unbounded = [
+        {"name": "collision", "direction": "decrease"},  # no headway to bound
+        {"name": "large_distance", "direction": "increase"},
+    ]
+    alone = Shield(
+        ShieldConfig.from_dict(
+            {"observation": {"features": [closing], "cluster_raw": False}, "criteria": unbounded}
+        )
+    )
     assert alone.normalise(np.array([20.0, 30.0, 15.0])).tolist() == [0.75]
     assert alone.physical(np.array([0.75])).tolist() == [5.0]
 
@@ -216,8 +261,12 @@ def test_the_paper_reviser_keeps_no_risk_model() -> None:
 
 
 def test_a_criterion_declared_without_a_direction_learns_which_actions_fail() -> None:
-    config = ShieldConfig.from_dict({"criteria": [{"name": "collision", "direction": None}],
-                                     "reviser": {**RISK, "activate_after_episodes": 20}})
+    config = ShieldConfig.from_dict(
+        {
+            "criteria": [{"name": "collision", "direction": None}],
+            "reviser": {**RISK, "activate_after_episodes": 20},
+        }
+    )
     assert config.criteria[0].direction is None
     shield = Shield(config)
     crash_world(shield, 20, seed=1)
@@ -228,6 +277,7 @@ def test_a_criterion_declared_without_a_direction_learns_which_actions_fail() ->
 
 def test_the_papers_reviser_refuses_a_criterion_without_a_direction() -> None:
     with pytest.raises(InvalidConfig) as error:
-        ShieldConfig.from_dict({"criteria": [{"name": "fall", "direction": None}],
-                                "reviser": {"method": "paper"}})
+        ShieldConfig.from_dict(
+            {"criteria": [{"name": "fall", "direction": None}], "reviser": {"method": "paper"}}
+        )
     assert error.value.field == "criteria.0.direction"

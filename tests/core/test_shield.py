@@ -116,8 +116,11 @@ BAD_STEPS = [
     (dict(observation=[1.0, 50.0, 2.0], action=None), InvalidAction, "action"),
     (dict(observation=[1.0, 50.0, 2.0], action="fast"), InvalidAction, "action"),
     (dict(observation=[1.0, 50.0, 2.0], action=0.0, event="meteor"), UnknownCriterion, "event"),
-    (dict(observation=[1.0, 50.0, 2.0], action=0.0, applied_action=math.inf), InvalidAction,
-     "applied_action"),
+    (
+        dict(observation=[1.0, 50.0, 2.0], action=0.0, applied_action=math.inf),
+        InvalidAction,
+        "applied_action",
+    ),
     (dict(observation=[1.0, 50.0, 2.0], action=0.0, stream=""), ShieldError, "stream"),
 ]
 
@@ -172,8 +175,7 @@ def test_snapshot_restore_makes_the_same_decisions() -> None:
 def version_2(config: dict[str, Any]) -> dict[str, Any]:
     """A configuration as version 2 of the stored format wrote it: the counted risk model's
     settings, the local model named, and no reach (it came with version 4)."""
-    old = {key: dict(value) if isinstance(value, dict) else value
-           for key, value in config.items()}
+    old = {key: dict(value) if isinstance(value, dict) else value for key, value in config.items()}
     old["version"] = 2
     del old["risk"]["reach_horizon"], old["risk"]["reach_radius"]
     old["risk"].update(model="local", prior_safe=1.0, refresh_steps=500)
@@ -213,16 +215,20 @@ def test_a_version_1_snapshot_restores_and_decides_as_it_did() -> None:
     assert copy.flags.entries.sum() > 0
 
 
-@pytest.mark.parametrize(("section", "name", "value"), [
-    ("observation", "knee_shape", "log"),
-    ("clustering", "failure_states", True),
-    ("reviser", "failure_centres", True),
-    ("reviser", "noise_side", "away"),
-    ("reviser", "flag_rate_per", "recognition"),
-    ("risk", "precursor_steps", 4),
-])
+@pytest.mark.parametrize(
+    ("section", "name", "value"),
+    [
+        ("observation", "knee_shape", "log"),
+        ("clustering", "failure_states", True),
+        ("reviser", "failure_centres", True),
+        ("reviser", "noise_side", "away"),
+        ("reviser", "flag_rate_per", "recognition"),
+        ("risk", "precursor_steps", 4),
+    ],
+)
 def test_a_stored_configuration_with_a_removed_switch_is_refused_by_name(
-        section: str, name: str, value: Any) -> None:
+    section: str, name: str, value: Any
+) -> None:
     old = version_1(ShieldConfig.paper().to_dict())
     assert ShieldConfig.from_stored(old) == ShieldConfig.paper()
     old[section][name] = value
@@ -238,9 +244,13 @@ def test_a_stored_configuration_with_a_removed_switch_is_refused_by_name(
 
 def test_a_version_1_configuration_lacking_later_fields_keeps_their_first_values() -> None:
     old = version_1(ShieldConfig.paper().to_dict())
-    for section, name in (("reviser", "method"), ("reviser", "flag_min_rate"),
-                          ("reviser", "flag_rate_per"), ("observation", "knee"),
-                          ("observation", "knee_shape")):
+    for section, name in (
+        ("reviser", "method"),
+        ("reviser", "flag_min_rate"),
+        ("reviser", "flag_rate_per"),
+        ("observation", "knee"),
+        ("observation", "knee_shape"),
+    ):
         del old[section][name]
     old["reviser"]["flags"] = "overwrite"  # flags per recognition mattered only under "rate"
     stored = ShieldConfig.from_stored(old)
@@ -261,8 +271,7 @@ def test_a_configuration_carries_its_version_and_refuses_another() -> None:
 
 def test_a_version_2_configuration_of_the_local_risk_model_loads_as_it_was() -> None:
     config = ShieldConfig.from_dict({"risk": {"horizon": 12, "margin": 0.01}})
-    without_reach = dataclasses.replace(config, risk=RiskConfig(12, margin=0.01,
-                                                                reach_horizon=0))
+    without_reach = dataclasses.replace(config, risk=RiskConfig(12, margin=0.01, reach_horizon=0))
     assert ShieldConfig.from_stored(version_2(config.to_dict())) == without_reach
     paper = version_2(ShieldConfig.paper().to_dict())
     paper["risk"]["model"] = "counts"  # not read by the paper's reviser
@@ -270,8 +279,7 @@ def test_a_version_2_configuration_of_the_local_risk_model_loads_as_it_was() -> 
 
 
 @pytest.mark.parametrize("model", ["counts", None])
-def test_a_stored_risk_reviser_of_the_counted_model_is_refused_by_name(model: str | None
-                                                                       ) -> None:
+def test_a_stored_risk_reviser_of_the_counted_model_is_refused_by_name(model: str | None) -> None:
     """The counted risk model was removed in version 3; a version-2 configuration without
     ``risk.model`` was written before the local model existed, so it used the counted one."""
     old = version_2(ShieldConfig().to_dict())
@@ -329,9 +337,14 @@ def test_a_knee_keeps_the_views_in_physical_units() -> None:
     assert shield.state_view(0)["centre"] == pytest.approx([16.0, 100.0, 8.0])
 
 
-@pytest.mark.parametrize(("knee", "field"), [
-    ([20.0], "observation.knee"), ([0.0, -1.0, 0.0], "observation.knee"),
-    ([0.0, math.inf, 0.0], "observation.knee.1")])
+@pytest.mark.parametrize(
+    ("knee", "field"),
+    [
+        ([20.0], "observation.knee"),
+        ([0.0, -1.0, 0.0], "observation.knee"),
+        ([0.0, math.inf, 0.0], "observation.knee.1"),
+    ],
+)
 def test_a_bad_knee_names_its_field(knee: list[float], field: str) -> None:
     with pytest.raises(ShieldError) as raised:
         ShieldConfig.from_dict({"observation": {"knee": knee}})
@@ -355,5 +368,6 @@ def test_a_model_that_saw_one_point_twice_restores() -> None:
         shield.step([10.0, 12.0, 9.0], 0.5, stream="s")
     assert max(shield.snapshot()["clustering"]["potentials"]) > 1.0
     restored = Shield.from_snapshot(shield.snapshot())
-    assert restored.step([11.0, 12.0, 9.0], 0.5, stream="s") == \
-        shield.step([11.0, 12.0, 9.0], 0.5, stream="s")
+    assert restored.step([11.0, 12.0, 9.0], 0.5, stream="s") == shield.step(
+        [11.0, 12.0, 9.0], 0.5, stream="s"
+    )

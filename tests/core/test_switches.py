@@ -147,8 +147,11 @@ def test_a6_literal_search_runs_below_the_hardest_braking() -> None:
     # a one-state model flagged for collision: every action is predicted to collide
     actions = {}
     for mode in ("fixed", "literal"):
-        shield = shield_with(reviser=paper_reviser(  # type: ignore[arg-type]
-            search=mode, activate_after_episodes=0, noise="std", noise_k=1e6))
+        shield = shield_with(
+            reviser=paper_reviser(  # type: ignore[arg-type]
+                search=mode, activate_after_episodes=0, noise="std", noise_k=1e6
+            )
+        )
         for _ in range(4):  # four episodes: the noise std is 2 / 4e6, negligible
             shield.step([1.0], None, event="collision", done=True)
         decision = shield.step([1.0], 1.0)
@@ -165,14 +168,14 @@ def test_a7_noise_is_a_variance_or_a_standard_deviation() -> None:
 
 @pytest.mark.parametrize(("event", "proposal"), [("collision", -2.0), ("large_distance", 2.0)])
 def test_one_sided_revisions_never_go_past_the_proposal_the_wrong_way(
-        event: str, proposal: float) -> None:
+    event: str, proposal: float
+) -> None:
     """A one-state model flagged for ``event`` revises every step and finds no way out: Alg. 2
     returns the extreme bin's midpoint plus noise (std 1.41 here), which against a collision
     brakes less than full braking half the time; ``one_sided`` keeps the proposal there."""
     applied = {}
     for one_sided in (False, True):
-        shield = shield_with(reviser=paper_reviser(activate_after_episodes=0,
-                                                   one_sided=one_sided))
+        shield = shield_with(reviser=paper_reviser(activate_after_episodes=0, one_sided=one_sided))
         for _ in range(4):
             shield.step([1.0], None, event=event, done=True)
         decisions = [shield.step([1.0], proposal) for _ in range(200)]
@@ -192,8 +195,9 @@ def test_a8_the_transition_is_learned_under_the_executed_or_the_proposed_action(
         state.applied_bin, state.proposed_bin = 3, 17  # the reviser changed bin 17 into bin 3
         before = [shield.transitions.matrix(a).copy() for a in range(20)]
         shield.step([0.5], 0.0)
-        changed[source] = [a for a in range(20)
-                           if not np.array_equal(before[a], shield.transitions.matrix(a))]
+        changed[source] = [
+            a for a in range(20) if not np.array_equal(before[a], shield.transitions.matrix(a))
+        ]
     assert changed == {"executed": [3], "proposed": [17]}
 
 
@@ -204,17 +208,22 @@ def test_a9_spread_definitions_differ() -> None:
         for z in (0.0, 0.1, 0.05):  # 0.1 joins state 0, 0.05 then moves it
             c.learn_one(np.array([z]))
         variances[spread] = float(c.variances()[0])
-    assert variances == pytest.approx({
-        "radius": (0.7 * 0.3 + 0.3 * np.sqrt(0.01 / 2)) ** 2,  # r^2 after one assignment
-        "member_variance": 0.01 / 2,  # scatter / N
-        "ets2004": 0.3**2 / 4,  # eTS-2004 membership exp(-4 d^2 / r^2)
-    })
+    assert variances == pytest.approx(
+        {
+            "radius": (0.7 * 0.3 + 0.3 * np.sqrt(0.01 / 2)) ** 2,  # r^2 after one assignment
+            "member_variance": 0.01 / 2,  # scatter / N
+            "ets2004": 0.3**2 / 4,  # eTS-2004 membership exp(-4 d^2 / r^2)
+        }
+    )
 
 
 @pytest.mark.parametrize(
     ("mode", "new_column", "new_row"),
-    [("prior", "positive", [1 / 3] * 3), ("zero_uniform", "zero", [1 / 3] * 3),
-     ("zero_identity", "zero", [0.0, 0.0, 1.0])],
+    [
+        ("prior", "positive", [1 / 3] * 3),
+        ("zero_uniform", "zero", [1 / 3] * 3),
+        ("zero_identity", "zero", [0.0, 0.0, 1.0]),
+    ],
 )
 def test_a10_expansion_values(mode: str, new_column: str, new_row: list[float]) -> None:
     model = LazyTransitions(1, TransitionConfig(expansion=mode), 10)  # type: ignore[arg-type]
@@ -231,9 +240,9 @@ def test_a11_single_product_ignores_the_horizon_beyond_two_steps() -> None:
     model = chain_model(3)
     model.learn_one(one_hot(1), 1, one_hot(2))
     preds = {
-        (mode, k): predict_ahead(model, one_hot(0), 0, ReviserConfig(multi_step=mode, horizon=k),
-                                 8)
-        for mode in ("iterate", "single") for k in (2, 3)
+        (mode, k): predict_ahead(model, one_hot(0), 0, ReviserConfig(multi_step=mode, horizon=k), 8)
+        for mode in ("iterate", "single")
+        for k in (2, 3)
     }
     np.testing.assert_array_equal(preds["iterate", 2], preds["single", 2])
     np.testing.assert_array_equal(preds["single", 2], preds["single", 3])
@@ -269,8 +278,12 @@ def test_a16_reset_forgets_what_a_moved_state_had_learned() -> None:
 
 def test_a16_reset_needs_the_lazy_backend() -> None:
     with pytest.raises(ValueError):
-        Shield(ShieldConfig(transitions=TransitionConfig(on_replace="reset"),
-                            limits=LimitsConfig(tpm_backend="dense")))
+        Shield(
+            ShieldConfig(
+                transitions=TransitionConfig(on_replace="reset"),
+                limits=LimitsConfig(tpm_backend="dense"),
+            )
+        )
 
 
 def test_paper_literal_preset_takes_the_literal_reading_everywhere() -> None:
@@ -296,7 +309,8 @@ def test_the_revision_noise_follows_the_width_of_the_action_range() -> None:
     for low, high in ((-2.0, 2.0), (0.0, 4.0)):
         config = dataclasses.replace(
             cliff_config(activate_after_episodes=0, one_sided=False),
-            action=ActionSpec(low=low, high=high))
+            action=ActionSpec(low=low, high=high),
+        )
         shield = Shield(config)
         for _ in range(4):
             shield.step([1.0], None, event="collision", done=True)

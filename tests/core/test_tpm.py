@@ -146,8 +146,9 @@ def test_recursive_estimate_converges_to_the_transition_frequencies() -> None:
 
 def test_update_touches_only_rows_with_mass() -> None:
     P = np.array([[0.5, 0.5], [0.2, 0.8]])
-    P_new, F_o = update_stable(P, np.array([1.0, 1.0]), np.array([1.0, 0.0]),
-                               np.array([1.0, 0.0]), 0.1)
+    P_new, F_o = update_stable(
+        P, np.array([1.0, 1.0]), np.array([1.0, 0.0]), np.array([1.0, 0.0]), 0.1
+    )
     assert P_new[1] == pytest.approx(P[1])
     assert F_o == pytest.approx([1.0, 0.9])
     assert P_new[0] == pytest.approx([0.5 + 0.1 * 0.5, 0.5 - 0.1 * 0.5])
@@ -201,8 +202,9 @@ def test_the_marginal_step_matches_the_loop_bit_for_bit_at_the_experiments_size(
         prev = belief
     for _ in range(200):
         belief = top_k(rng.random(lazy.n_states) ** 4, 16)
-        np.testing.assert_array_equal(lazy.predict_marginal(belief, True),
-                                      marginal_by_action(lazy, belief, True))
+        np.testing.assert_array_equal(
+            lazy.predict_marginal(belief, True), marginal_by_action(lazy, belief, True)
+        )
 
 
 @pytest.mark.slow  # long streams: seconds
@@ -226,8 +228,10 @@ def test_memory_follows_what_was_learned_not_the_widest_row() -> None:
     assert lazy.nbytes() < 400 * entries  # the per-state scales and an amortised pool
     for a in range(q):
         for i in (0, 1, n - 1):
-            np.testing.assert_allclose(lazy.predict(one_hot(i), a, False),
-                                       dense.predict(one_hot(i), a, False), rtol=1e-9)
+            np.testing.assert_allclose(
+                lazy.predict(one_hot(i), a, False), dense.predict(one_hot(i), a, False), rtol=1e-9
+            )
     copy = LazyTransitions.restore(q, cfg, n, lazy.snapshot())
-    np.testing.assert_array_equal(copy.predict(one_hot(0), 0, True),
-                                  lazy.predict(one_hot(0), 0, True))
+    np.testing.assert_array_equal(
+        copy.predict(one_hot(0), 0, True), lazy.predict(one_hot(0), 0, True)
+    )

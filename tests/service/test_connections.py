@@ -28,9 +28,17 @@ LIMIT = 150  # its most connections
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     data = tmp_path_factory.mktemp("connections") / "data"
-    running = start_server(data, "--header-timeout", str(TIMEOUT), "--body-timeout",
-                           str(TIMEOUT), "--max-connections", str(LIMIT),
-                           "--max-body-bytes", "2048")
+    running = start_server(
+        data,
+        "--header-timeout",
+        str(TIMEOUT),
+        "--body-timeout",
+        str(TIMEOUT),
+        "--max-connections",
+        str(LIMIT),
+        "--max-body-bytes",
+        "2048",
+    )
     yield running
     running.stop()
 
@@ -66,15 +74,18 @@ def error_of(response: bytes) -> tuple[int, dict[str, Any]]:
 
 
 def test_half_sent_requests_are_answered_408_and_closed_while_others_are_served(
-        server: Server) -> None:
+    server: Server,
+) -> None:
     opened = time.monotonic()
     line_only = [socket.create_connection(address(server)) for _ in range(80)]
     for s in line_only:  # the request line and one header, never the end of the headers
         s.sendall(b"POST /revise HTTP/1.1\r\nHost: shield\r\n")
     body_stalled = [socket.create_connection(address(server)) for _ in range(20)]
     for s in body_stalled:
-        s.sendall(b"POST /revise HTTP/1.1\r\nHost: shield\r\ncontent-type: application/json"
-                  b"\r\nContent-Length: 100\r\n\r\n{\"observation\": [")
+        s.sendall(
+            b"POST /revise HTTP/1.1\r\nHost: shield\r\ncontent-type: application/json"
+            b'\r\nContent-Length: 100\r\n\r\n{"observation": ['
+        )
     kept_alive = socket.create_connection(address(server))  # the second request half-sent
     kept_alive.sendall(b"GET /healthz HTTP/1.1\r\nHost: shield\r\n\r\n")
     assert kept_alive.recv(65536).startswith(b"HTTP/1.1 200")
@@ -95,7 +106,8 @@ def test_half_sent_requests_are_answered_408_and_closed_while_others_are_served(
 
 
 def test_a_connection_beyond_the_limit_is_answered_503_then_served_once_others_close(
-        server: Server) -> None:
+    server: Server,
+) -> None:
     idle = [socket.create_connection(address(server)) for _ in range(LIMIT)]
     try:
         time.sleep(0.2)  # the server has accepted them all
@@ -123,20 +135,23 @@ def test_headers_over_their_limit_get_431_and_a_large_body_does_not(server: Serv
     assert (status, error["code"]) == (431, "headers_too_large")
     body = b"x" * 200_000  # headers and body in one write: only the headers count
     with socket.create_connection(address(server)) as s:
-        s.sendall(b"PUT /models/big HTTP/1.1\r\nHost: shield\r\nConnection: close\r\n"
-                  b"Content-Type: application/json\r\nContent-Length: %d\r\n\r\n" % len(body)
-                  + body)
+        s.sendall(
+            b"PUT /models/big HTTP/1.1\r\nHost: shield\r\nConnection: close\r\n"
+            b"Content-Type: application/json\r\nContent-Length: %d\r\n\r\n" % len(body) + body
+        )
         status, error = error_of(until_closed([s], seconds=10)[s])
     assert (status, error["code"]) == (422, "invalid_snapshot")
 
 
 @pytest.mark.parametrize("size", [5_000, 2_000_000])
-def test_a_websocket_frame_over_twice_the_limit_is_closed_with_1009(server: Server,
-                                                                    size: int) -> None:
+def test_a_websocket_frame_over_twice_the_limit_is_closed_with_1009(
+    server: Server, size: int
+) -> None:
     ws = websocket.create_connection(server.url.replace("http", "ws") + "/ws", timeout=10)
     try:
-        ws.send(json.dumps({"observation": [10.0, 50.0, 12.0], "action": 0.5,
-                            "stream": "s" * size}))
+        ws.send(
+            json.dumps({"observation": [10.0, 50.0, 12.0], "action": 0.5, "stream": "s" * size})
+        )
         opcode, data = ws.recv_data(control_frame=True)
     finally:
         ws.close()
@@ -146,8 +161,12 @@ def test_a_websocket_frame_over_twice_the_limit_is_closed_with_1009(server: Serv
 
 def test_the_limits_are_settings_with_documented_defaults() -> None:
     defaults = Settings()
-    assert (defaults.header_timeout, defaults.body_timeout, defaults.keep_alive_timeout,
-            defaults.max_connections) == (10.0, 20.0, 5, 1000)
+    assert (
+        defaults.header_timeout,
+        defaults.body_timeout,
+        defaults.keep_alive_timeout,
+        defaults.max_connections,
+    ) == (10.0, 20.0, 5, 1000)
     api = (Path(__file__).parents[2] / "docs" / "api.md").read_text()
     for option in ("header_timeout", "body_timeout", "keep_alive_timeout", "max_connections"):
         assert f"`{option}`" in api

@@ -8,8 +8,11 @@ import pytest
 
 from bench.durability import DAMAGE, trial
 
-REPAIRED = {"torn journal (last 40 bytes cut)", "bit-flipped journal (last record)",
-            "garbage journal tail (64 bytes)"}
+REPAIRED = {
+    "torn journal (last 40 bytes cut)",
+    "bit-flipped journal (last record)",
+    "garbage journal tail (64 bytes)",
+}
 
 pytestmark = pytest.mark.slow  # real servers killed and restarted
 

@@ -15,8 +15,10 @@ from tests.utils import random_stream
 
 
 def keyed_steps(seed: int, n: int, prefix: str = "k") -> list[Step]:
-    return [Step(z, None if done else a, done=done, key=f"{prefix}{i}")
-            for i, (z, a, done) in enumerate(random_stream(seed, n))]
+    return [
+        Step(z, None if done else a, done=done, key=f"{prefix}{i}")
+        for i, (z, a, done) in enumerate(random_stream(seed, n))
+    ]
 
 
 def reopen(data: Path, **kwargs: object) -> ModelRegistry:
@@ -48,15 +50,18 @@ def test_a_key_sent_with_another_step_is_refused_and_changes_nothing() -> None:
     registry = ModelRegistry()
     registry.open()
     registry.step("default", Step([10.0, 50.0, 12.0], 0.5, key="a"))
-    for other in (Step([10.0, 50.0, 12.0], 0.4, key="a"),
-                  Step([10.0, 50.0, 12.0], 0.5, stream="car-2", key="a"),
-                  Step([10.0, 50.0, 12.0], 0.5, learn=False, key="a")):
+    for other in (
+        Step([10.0, 50.0, 12.0], 0.4, key="a"),
+        Step([10.0, 50.0, 12.0], 0.5, stream="car-2", key="a"),
+        Step([10.0, 50.0, 12.0], 0.5, learn=False, key="a"),
+    ):
         with pytest.raises(KeyReused) as refused:
             registry.step("default", other)
         assert refused.value.field == "idempotency_key"
     with pytest.raises(KeyReused) as refused:
-        registry.step_batch("default", [Step([1.0, 2.0, 3.0], 0.1, key="b"),
-                                        Step([1.0, 2.0, 3.0], 0.1, key="b")])
+        registry.step_batch(
+            "default", [Step([1.0, 2.0, 3.0], 0.1, key="b"), Step([1.0, 2.0, 3.0], 0.1, key="b")]
+        )
     assert refused.value.field == "steps.1.idempotency_key"
     assert version(registry) == 1
 
@@ -92,7 +97,8 @@ def test_the_window_is_bounded_and_a_request_never_outgrows_it() -> None:
 
 @pytest.mark.parametrize("snapshot_every", [10**6, 7])
 def test_a_step_applied_and_unanswered_at_a_crash_is_answered_once_after_it(
-        tmp_path: Path, snapshot_every: int) -> None:
+    tmp_path: Path, snapshot_every: int
+) -> None:
     """A kill -9 between the apply and the answer: the retry finds the key in the journal
     (or, once a snapshot has covered the step, in the window the new journal starts with)."""
     first = reopen(tmp_path, snapshot_every=snapshot_every)

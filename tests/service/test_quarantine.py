@@ -56,8 +56,10 @@ def flip_snapshot(model: Path) -> None:
 def bad_journal_record(model: Path) -> None:
     lines = (model / "journal.log").read_bytes().splitlines()
     version = json.loads(lines[-1].split(b" ", 1)[1])["v"]
-    record = {"v": version + 1, "steps": [{"o": [1.0], "a": 0.1, "s": "0", "e": None,
-                                           "d": False, "p": None, "h": False}]}
+    record = {
+        "v": version + 1,
+        "steps": [{"o": [1.0], "a": 0.1, "s": "0", "e": None, "d": False, "p": None, "h": False}],
+    }
     with open(model / "journal.log", "ab") as f:
         f.write(journal_line(record))  # a valid checksum, an observation of the wrong size
 
@@ -96,7 +98,8 @@ DAMAGE: dict[str, tuple[Callable[[Path], None], int]] = {
 
 @pytest.mark.parametrize("case", sorted(DAMAGE))
 def test_a_damaged_model_is_set_aside_and_the_others_serve(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture, case: str) -> None:
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, case: str
+) -> None:
     damage, snapshot_every = DAMAGE[case]
     stored(tmp_path, snapshot_every)
     model = tmp_path / "models" / "bad"
@@ -134,9 +137,12 @@ def test_the_service_names_a_quarantined_model_and_answers_503(tmp_path: Path) -
     with TestClient(create_app(Settings(data_dir=tmp_path))) as client:
         ready = client.get("/readyz")
         assert ready.status_code == 200 and "bad" in ready.json()["quarantined"]
-        r = client.post("/models/bad/revise", json={"observation": [1.0, 2.0, 3.0],
-                                                    "action": 0.1})
+        r = client.post("/models/bad/revise", json={"observation": [1.0, 2.0, 3.0], "action": 0.1})
         assert r.status_code == 503
         assert r.json()["error"]["code"] == "model_quarantined"
-        assert client.post("/models/good/revise", json={"observation": [1.0, 2.0, 3.0],
-                                                        "action": 0.1}).status_code == 200
+        assert (
+            client.post(
+                "/models/good/revise", json={"observation": [1.0, 2.0, 3.0], "action": 0.1}
+            ).status_code
+            == 200
+        )

@@ -85,8 +85,7 @@ def test_concurrent_streams_on_one_model_lose_no_update() -> None:
     def stream(i: int) -> None:
         try:
             for z, a, done in random_stream(i, 100):
-                registry.step("default", Step(z, None if done else a, stream=f"s{i}",
-                                              done=done))
+                registry.step("default", Step(z, None if done else a, stream=f"s{i}", done=done))
         except BaseException as error:  # pragma: no cover - reported below
             errors.append(error)
 

@@ -65,7 +65,8 @@ def stored_model(data: Path) -> Path:
 
 @pytest.mark.parametrize("case", sorted(TAIL_DAMAGE))
 def test_steps_acknowledged_after_a_repair_survive_the_next_crash(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture, case: str) -> None:
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, case: str
+) -> None:
     model = stored_model(tmp_path)
     journal = model / "journal.log"
     intact = journal.read_bytes()
@@ -76,8 +77,11 @@ def test_steps_acknowledged_after_a_repair_survive_the_next_crash(
     assert "m" not in repaired.quarantined
     recovered = version(repaired)
     assert recovered >= 499  # at most the damaged last record is gone
-    assert any("'m'" in r.getMessage() and "repaired" in r.getMessage()
-               for r in caplog.records if r.levelno >= logging.ERROR)
+    assert any(
+        "'m'" in r.getMessage() and "repaired" in r.getMessage()
+        for r in caplog.records
+        if r.levelno >= logging.ERROR
+    )
     # the cut bytes are kept beside the journal, which now ends at its last good record
     kept = list(model.glob("journal.log.damaged-*"))
     assert len(kept) == 1

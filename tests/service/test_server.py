@@ -89,20 +89,23 @@ def test_the_three_clients_agree_with_each_other(live_server: Server) -> None:
         for name in ("via-http", "via-ws", "via-async"):
             admin.create_model(name, {"reviser": {"activate_after_episodes": 1}})
     with ShieldClient(live_server.url, model="via-http") as http:
-        by_http = [http.revise(z, a, done=d, event="collision" if d else None)
-                   for z, a, d in steps]
+        by_http = [http.revise(z, a, done=d, event="collision" if d else None) for z, a, d in steps]
         with pytest.raises(ShieldAPIError) as raised:
             http.revise([1.0], 0.0)
         assert (raised.value.status, raised.value.code, raised.value.field) == (
-            422, "invalid_observation", "observation")
+            422,
+            "invalid_observation",
+            "observation",
+        )
     with ShieldSession(live_server.url, model="via-ws") as ws:
-        by_ws = [ws.revise(z, a, done=d, event="collision" if d else None)
-                 for z, a, d in steps]
+        by_ws = [ws.revise(z, a, done=d, event="collision" if d else None) for z, a, d in steps]
 
     async def run_async() -> list[Decision]:
         async with AsyncShieldClient(live_server.url, model="via-async") as shield:
-            return [await shield.revise(z, a, done=d, event="collision" if d else None)
-                    for z, a, d in steps]
+            return [
+                await shield.revise(z, a, done=d, event="collision" if d else None)
+                for z, a, d in steps
+            ]
 
     by_async = asyncio.run(run_async())
     assert by_http == by_ws == by_async  # typed records, field for field
@@ -174,7 +177,10 @@ def test_the_websocket_session_names_each_error_and_stays_in_step(tmp_path: Path
             with pytest.raises(ShieldAPIError) as bad:
                 session.revise([10.0, 50.0], 0.5)
             assert (bad.value.status, bad.value.code, bad.value.field) == (
-                422, "invalid_observation", "observation")
+                422,
+                "invalid_observation",
+                "observation",
+            )
             after = session.revise([10.0, 50.0, 12.0], 0.5)  # the session goes on
             assert after.model_version == first.model_version + 1
             server.kill()
@@ -185,7 +191,8 @@ def test_the_websocket_session_names_each_error_and_stays_in_step(tmp_path: Path
 
 
 def test_a_websocket_frame_over_the_body_limit_is_refused_far_over_it_the_session_ends(
-        tmp_path: Path) -> None:
+    tmp_path: Path,
+) -> None:
     server = start_server(tmp_path / "data", "--max-body-bytes", "2048")
     try:
         with ShieldSession(server.url) as session:
@@ -213,7 +220,8 @@ def test_without_a_data_directory_the_server_says_so(tmp_path: Path) -> None:
     port = free_port()
     process = subprocess.Popen(
         [sys.executable, "-m", "app", "serve", "--port", str(port)],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
     )
     try:
         for _ in range(100):
@@ -236,12 +244,20 @@ def test_the_container_command_runs_outside_docker(tmp_path: Path) -> None:
     assert 'CMD ["python", "-m", "app", "serve"]' in dockerfile
     assert 'CMD ["python", "-m", "app.healthcheck"]' in dockerfile
     port = free_port()
-    env = {**os.environ, "EFSM_HOST": "0.0.0.0", "EFSM_PORT": str(port),
-           "EFSM_DATA_DIR": str(tmp_path / "data")}
+    env = {
+        **os.environ,
+        "EFSM_HOST": "0.0.0.0",
+        "EFSM_PORT": str(port),
+        "EFSM_DATA_DIR": str(tmp_path / "data"),
+    }
     probe = [sys.executable, "-m", "app.healthcheck"]
     assert subprocess.run(probe, env=env, timeout=10).returncode == 1  # nothing listens yet
-    process = subprocess.Popen([sys.executable, "-m", "app", "serve"], env=env,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "app", "serve"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         for _ in range(100):
             if subprocess.run(probe, env=env, timeout=10).returncode == 0:
@@ -261,8 +277,10 @@ def test_a_long_batch_on_one_model_does_not_stall_another(live_server: Server) -
     with ShieldClient(live_server.url) as admin:
         admin.create_model("busy")
         admin.create_model("quiet")
-    steps = [{"observation": z, "action": None if d else a, "done": d}
-             for z, a, d in random_stream(3, 4096)]
+    steps = [
+        {"observation": z, "action": None if d else a, "done": d}
+        for z, a, d in random_stream(3, 4096)
+    ]
     finished = threading.Event()
     durations: list[float] = []
 

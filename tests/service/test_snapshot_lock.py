@@ -19,8 +19,9 @@ def steps(seed: int, n: int) -> list[Step]:
     return [Step(z, None if done else a, done=done) for z, a, done in random_stream(seed, n)]
 
 
-def test_steps_go_on_while_a_snapshot_is_written(tmp_path: Path,
-                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+def test_steps_go_on_while_a_snapshot_is_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     registry = ModelRegistry(tmp_path, fsync="always", snapshot_every=20)
     registry.open()
     writing, stepped = threading.Event(), threading.Event()

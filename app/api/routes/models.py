@@ -17,21 +17,34 @@ from app.core import InvalidConfig, InvalidSnapshot, ShieldConfig
 from app.service import codec
 from app.service.registry import DEFAULT_MODEL, Model, ModelRegistry
 
-router = APIRouter(tags=["models"], dependencies=[Depends(require_token)], responses=ERRORS,
-                   route_class=KnownQueryRoute)
+router = APIRouter(
+    tags=["models"],
+    dependencies=[Depends(require_token)],
+    responses=ERRORS,
+    route_class=KnownQueryRoute,
+)
 NPZ = "application/x-npz"
 
 
 def summary(model: Model) -> dict[str, Any]:
     c = model.shield.counters
-    return {"name": model.name, "n_states": model.shield.n_states, "steps": c.steps,
-            "episodes": c.episodes, "model_version": c.model_version,
-            "interventions": dict(c.interventions), "streams": len(model.shield.streams)}
+    return {
+        "name": model.name,
+        "n_states": model.shield.n_states,
+        "steps": c.steps,
+        "episodes": c.episodes,
+        "model_version": c.model_version,
+        "interventions": dict(c.interventions),
+        "streams": len(model.shield.streams),
+    }
 
 
-@router.post("/models", status_code=status.HTTP_201_CREATED, response_model=ModelSummary,
-             responses={409: {"model": ErrorBody,
-                              "description": "model_exists or too_many_models"}})
+@router.post(
+    "/models",
+    status_code=status.HTTP_201_CREATED,
+    response_model=ModelSummary,
+    responses={409: {"model": ErrorBody, "description": "model_exists or too_many_models"}},
+)
 def create_model(body: ModelCreate, registry: RegistryDep) -> dict[str, Any]:
     """Create an empty model with the paper's configuration and the given overrides."""
     try:  # the core's bounds, then the server's: either names the body's field
@@ -49,19 +62,23 @@ def list_models(registry: RegistryDep) -> dict[str, Any]:
 
 @router.get(
     "/models/{name}",
-    responses={200: {"content": {"application/json": {}, NPZ: {}},
-                     "description": "The snapshot: readable views plus the exact state."}},
+    responses={
+        200: {
+            "content": {"application/json": {}, NPZ: {}},
+            "description": "The snapshot: readable views plus the exact state.",
+        }
+    },
 )
 def get_model(
     name: NamePath,
     registry: RegistryDep,
-    tpm: Annotated[Literal["dense", "sparse", "none"], Query(
-        description="Transition matrices: all entries, those >= min_prob, or none.")] = "sparse",
-    action: Annotated[int | None, Query(ge=0, description="Only this action bin's matrix.")]
-    = None,
+    tpm: Annotated[
+        Literal["dense", "sparse", "none"],
+        Query(description="Transition matrices: all entries, those >= min_prob, or none."),
+    ] = "sparse",
+    action: Annotated[int | None, Query(ge=0, description="Only this action bin's matrix.")] = None,
     min_prob: Annotated[float, Query(gt=0, le=1)] = 1e-3,
-    exact: Annotated[bool, Query(description="Include the exact state that PUT restores.")]
-    = True,
+    exact: Annotated[bool, Query(description="Include the exact state that PUT restores.")] = True,
     format: Annotated[Literal["json", "npz"] | None, Query()] = None,
     accept: Annotated[str | None, Header()] = None,
 ) -> Response:
@@ -72,10 +89,14 @@ def get_model(
         if action is not None and action >= shield.config.action.n_bins:
             raise InvalidQuery(f"action bin {action} does not exist", field="action")
         if format == "npz" or (format is None and accept is not None and NPZ in accept):
-            return Response(codec.to_npz(shield.snapshot()), media_type=NPZ, headers={
-                "Content-Disposition": f'attachment; filename="{name}.npz"'})
+            return Response(
+                codec.to_npz(shield.snapshot()),
+                media_type=NPZ,
+                headers={"Content-Disposition": f'attachment; filename="{name}.npz"'},
+            )
         body: dict[str, Any] = {
-            **summary(model), "config": shield.config.to_dict(),
+            **summary(model),
+            "config": shield.config.to_dict(),
             **codec.readable(shield, tpm, action, min_prob),
         }
         if exact:
@@ -105,10 +126,18 @@ def get_default_model(
     return get_model(DEFAULT_MODEL, registry, tpm, action, min_prob, exact, format, accept)
 
 
-@router.put("/models/{name}", response_model=ModelSummary,
-            openapi_extra={"requestBody": {"content": {
+@router.put(
+    "/models/{name}",
+    response_model=ModelSummary,
+    openapi_extra={
+        "requestBody": {
+            "content": {
                 "application/json": {"schema": {"type": "object"}},
-                NPZ: {"schema": {"type": "string", "format": "binary"}}}}})
+                NPZ: {"schema": {"type": "string", "format": "binary"}},
+            }
+        }
+    },
+)
 async def put_model(name: NamePath, request: Request, registry: RegistryDep) -> dict[str, Any]:
     """Create or replace a model from a snapshot (the JSON of GET, or its .npz)."""
     async with request.app.state.restores:  # memory: at most this many read at once
@@ -129,9 +158,11 @@ def restore(registry: ModelRegistry, name: str, blob: bytes, npz: bool, limit: i
     if npz:
         return registry.restore(name, codec.from_npz(blob, limit))
     if len(blob) > limit // JSON_INFLATION:
-        raise TooLarge(f"a JSON snapshot over {limit // JSON_INFLATION} bytes (parsed, it "
-                       f"would take about {JSON_INFLATION} times as much): send its .npz",
-                       field="body")
+        raise TooLarge(
+            f"a JSON snapshot over {limit // JSON_INFLATION} bytes (parsed, it "
+            f"would take about {JSON_INFLATION} times as much): send its .npz",
+            field="body",
+        )
     try:
         document = json.loads(blob)
     except (ValueError, RecursionError) as error:
@@ -152,5 +183,3 @@ def delete_model(name: NamePath, registry: RegistryDep) -> Response:
 def reset_model(name: NamePath, registry: RegistryDep) -> dict[str, Any]:
     """Empty a model: back to no states."""
     return summary(registry.reset(name))
-
-

@@ -25,15 +25,21 @@ def readyz(registry: RegistryDep) -> JSONResponse:
     """The models are loaded (no token needed); models set aside for damaged files are
     named with the reason (the others serve)."""
     ready = registry.ready
-    body = {"status": "ready" if ready else "loading", "models": len(registry.names()),
-            "quarantined": registry.quarantined}
+    body = {
+        "status": "ready" if ready else "loading",
+        "models": len(registry.names()),
+        "quarantined": registry.quarantined,
+    }
     return JSONResponse(body, status_code=200 if ready else 503)
 
 
-@router.get("/metrics", dependencies=[Depends(require_token)],
-            responses={200: {"content": {"text/plain": {}},
-                             "description": "Prometheus text format."}})
+@router.get(
+    "/metrics",
+    dependencies=[Depends(require_token)],
+    responses={200: {"content": {"text/plain": {}}, "description": "Prometheus text format."}},
+)
 def metrics(request: Request) -> Response:
     """Prometheus text format."""
-    return Response(generate_latest(request.app.state.metrics.registry),
-                    media_type=CONTENT_TYPE_LATEST)
+    return Response(
+        generate_latest(request.app.state.metrics.registry), media_type=CONTENT_TYPE_LATEST
+    )

@@ -69,10 +69,14 @@ def check_size(n: int, limit: int) -> None:
         raise TooLarge(f"a batch holds at most {limit} steps, got {n}", field="steps")
 
 
-@router.post("/models/{name}/revise/batch", response_model=BatchResponse,
-             dependencies=[Depends(require_token)])
-def revise_batch(name: NamePath, body: BatchRequest, registry: RegistryDep,
-                 settings: SettingsDep) -> Response:
+@router.post(
+    "/models/{name}/revise/batch",
+    response_model=BatchResponse,
+    dependencies=[Depends(require_token)],
+)
+def revise_batch(
+    name: NamePath, body: BatchRequest, registry: RegistryDep, settings: SettingsDep
+) -> Response:
     """Steps of one model, applied in order; one bad step rejects the whole batch."""
     check_size(len(body.steps), settings.max_batch)
     decisions = registry.step_batch(name, [to_step(s) for s in body.steps])
@@ -80,8 +84,9 @@ def revise_batch(name: NamePath, body: BatchRequest, registry: RegistryDep,
 
 
 @router.post("/revise/batch", response_model=BatchResponse, dependencies=[Depends(require_token)])
-def revise_across(body: ModelBatchRequest, registry: RegistryDep, settings: SettingsDep
-                  ) -> Response:
+def revise_across(
+    body: ModelBatchRequest, registry: RegistryDep, settings: SettingsDep
+) -> Response:
     """Steps across models (each names its model), in order; one bad step rejects them all."""
     check_size(len(body.steps), settings.max_batch)
     decisions = registry.step_many([(s.model, to_step(s)) for s in body.steps])

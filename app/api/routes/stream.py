@@ -25,23 +25,27 @@ async def model_stream(websocket: WebSocket, name: NamePath) -> None:
     """A stream of steps for one model over one connection."""
     app = websocket.app
     registry: ModelRegistry = app.state.registry
-    if not token_ok(app.state.settings.token,
-                    given_token(websocket.headers, websocket.query_params)):
+    if not token_ok(
+        app.state.settings.token, given_token(websocket.headers, websocket.query_params)
+    ):
         await websocket.close(code=POLICY_VIOLATION, reason="missing or wrong bearer token")
         return
     await websocket.accept()
     unknown = next((key for key in websocket.query_params if key != "token"), None)
     if unknown is not None:  # as over HTTP: a misspelt option is not ignored
-        await refuse(websocket, error_body(
-            "invalid_query", "unknown query parameter; a stream takes token", unknown))
+        await refuse(
+            websocket,
+            error_body("invalid_query", "unknown query parameter; a stream takes token", unknown),
+        )
         return
     try:
         registry.get(name)
     except ShieldError as error:
         await refuse(websocket, error_body(error.code, error.message, "name"))
         return
-    await serve_frames(websocket, app.state.settings.max_body_bytes,
-                       lambda text: answer(registry, name, text))
+    await serve_frames(
+        websocket, app.state.settings.max_body_bytes, lambda text: answer(registry, name, text)
+    )
 
 
 async def refuse(websocket: WebSocket, body: dict[str, Any]) -> None:
@@ -50,8 +54,9 @@ async def refuse(websocket: WebSocket, body: dict[str, Any]) -> None:
     await websocket.close(code=POLICY_VIOLATION)
 
 
-async def serve_frames(websocket: WebSocket, limit: int,
-                       reply: Callable[[str], Awaitable[str]]) -> None:
+async def serve_frames(
+    websocket: WebSocket, limit: int, reply: Callable[[str], Awaitable[str]]
+) -> None:
     """Answer each text frame with ``reply(text)``, in order, until the client leaves; a
     frame that is not text, or over ``limit`` bytes (the body limit of HTTP), gets an error
     frame and the stream goes on."""
@@ -64,12 +69,14 @@ async def serve_frames(websocket: WebSocket, limit: int,
             return
         text = message.get("text")
         if text is None:
-            await websocket.send_text(json.dumps(error_body(
-                "unsupported_frame", "send each step as a JSON text frame")))
+            await websocket.send_text(
+                json.dumps(error_body("unsupported_frame", "send each step as a JSON text frame"))
+            )
             continue
         if 4 * len(text) > limit and len(text.encode()) > limit:  # UTF-8: 1-4 bytes a character
-            await websocket.send_text(json.dumps(error_body(
-                "too_large", f"frame over {limit} bytes")))
+            await websocket.send_text(
+                json.dumps(error_body("too_large", f"frame over {limit} bytes"))
+            )
             continue
         await websocket.send_text(await reply(text))
 

@@ -25,14 +25,20 @@ router = APIRouter(tags=["live"], responses=ERRORS, route_class=KnownQueryRoute)
 
 
 @router.get("/models/{name}/events", response_class=StreamingResponse)
-async def events(name: NamePath, request: Request, registry: RegistryDep,
-                 token: Annotated[str | None, Query(description="For EventSource, which "
-                                                    "cannot send headers.")] = None
-                 ) -> StreamingResponse:
+async def events(
+    name: NamePath,
+    request: Request,
+    registry: RegistryDep,
+    token: Annotated[
+        str | None, Query(description="For EventSource, which cannot send headers.")
+    ] = None,
+) -> StreamingResponse:
     """Server-sent events: one ``data:`` line per step of the model (its decision record, the
     observation, and the state when one appears or is flagged)."""
-    if not token_ok(request.app.state.settings.token,
-                    given_token(request.headers, {"token": token} if token else {})):
+    if not token_ok(
+        request.app.state.settings.token,
+        given_token(request.headers, {"token": token} if token else {}),
+    ):
         raise Unauthorized("missing or wrong bearer token")
     model = registry.get(name)
     loop = asyncio.get_running_loop()
@@ -50,8 +56,11 @@ async def events(name: NamePath, request: Request, registry: RegistryDep,
         loop.call_soon_threadsafe(offer, event)
 
     unsubscribe = registry.watch(name, push)
-    hello = {"type": "hello", "n_states": model.shield.n_states,
-             "model_version": model.shield.counters.model_version}
+    hello = {
+        "type": "hello",
+        "n_states": model.shield.n_states,
+        "model_version": model.shield.counters.model_version,
+    }
 
     async def stream() -> AsyncIterator[str]:
         try:
@@ -66,23 +75,33 @@ async def events(name: NamePath, request: Request, registry: RegistryDep,
         finally:
             unsubscribe()
 
-    return StreamingResponse(stream(), media_type="text/event-stream",
-                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
+    return StreamingResponse(
+        stream(),
+        media_type="text/event-stream",
+        headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
+    )
 
 
 @router.get("/models/{name}/states/{index}", dependencies=[Depends(require_token)])
-def state(name: NamePath, index: Annotated[int, PathParam(ge=0, description="State index.")],
-          registry: RegistryDep,
-          top: Annotated[int, Query(ge=1, le=50)] = 5) -> dict[str, Any]:
+def state(
+    name: NamePath,
+    index: Annotated[int, PathParam(ge=0, description="State index.")],
+    registry: RegistryDep,
+    top: Annotated[int, Query(ge=1, le=50)] = 5,
+) -> dict[str, Any]:
     """One state and, per action, its most likely next states."""
     model = registry.get(name)
     with model.lock:
         shield = model.shield
         if not 0 <= index < shield.n_states:
             raise NotFound(f"no state {index}", field="index")
-        return {**shield.state_view(index),
-                "next": [{"bin": a, "states": [{"state": j, "prob": p} for j, p in row]}
-                         for a, row in enumerate(shield.next_states(index, top))]}
+        return {
+            **shield.state_view(index),
+            "next": [
+                {"bin": a, "states": [{"state": j, "prob": p} for j, p in row]}
+                for a, row in enumerate(shield.next_states(index, top))
+            ],
+        }
 
 
 @router.get("/", include_in_schema=False)
@@ -91,9 +110,11 @@ def root() -> RedirectResponse:
 
 
 @router.get("/dashboard", include_in_schema=False)
-def dashboard(model: Annotated[str | None, Query(
-        description="The model the page opens on; its script reads it.")] = None
-              ) -> FileResponse:
+def dashboard(
+    model: Annotated[
+        str | None, Query(description="The model the page opens on; its script reads it.")
+    ] = None,
+) -> FileResponse:
     """The page; it holds no data, so it needs no token (its requests do)."""
     return FileResponse(STATIC / "index.html")
 
