@@ -20,6 +20,8 @@ import platform
 import sys
 import tempfile
 import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -121,10 +123,12 @@ def main() -> None:
             f"| identical weights |"
         )
         print("|---|---:|---:|---:|---|")
-        rows = [("one run (DDPG)", lambda: separate(other, args.rounds, args.steps))] + [
+        rows: list[tuple[str, Callable[[], dict[str, Any]]]] = [
+            ("one run (DDPG)", lambda: separate(other, args.rounds, args.steps))
+        ] + [
             (
                 f"lockstep, {m} run{'s' if m > 1 else ''}",
-                lambda m=m: ensembles(other, m, args.rounds, args.steps),
+                partial(ensembles, other, m, args.rounds, args.steps),
             )
             for m in SIZES
         ]

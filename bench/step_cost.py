@@ -70,6 +70,7 @@ def build(n: int, seed: int = SEED, reach_horizon: int = RiskConfig().reach_hori
             prev, before, action, z, edge if rng.random() < 0.2 else None
         )
         prev = belief
+    assert shield.local_risk is not None
     shield.local_risk.forget(0)  # the slot the shield's first stream takes
     return shield
 

@@ -67,12 +67,13 @@ def batch(shield: ModuleType, base: str, who: str) -> Callable[[int, int], list[
 
     def block_of(block: int, seed: int) -> list[Callable[[], Any]]:
         work = [steps(block, seed + 1000 * k, "inspect") for k in range(MODELS)]
-        return [
-            lambda i=i: carrier.revise_many(
+
+        def request(i: int) -> Callable[[], Any]:
+            return lambda: carrier.revise_many(
                 [(f"{who}-{k}", body(*work[k][i], stream="bench")) for k in range(MODELS)]
             )
-            for i in range(block)
-        ]
+
+        return [request(i) for i in range(block)]
 
     return block_of
 

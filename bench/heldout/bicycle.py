@@ -29,14 +29,13 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import World
+from bench.worlds.harness import Spaces, World
 from client.shield.spaces import config_for
 
 DT = 0.05  # [s]
@@ -142,7 +141,7 @@ class Rider:
 # What a new user writes (client.shield.config_for): the ranges the observation usually
 # takes, the steering's range in 20 bins, and each failure with the direction of steering
 # that moves away from it; the second adds where each failure lies.
-SPACES = SimpleNamespace(
+SPACES = Spaces(
     observation_space=Box(
         low=np.array([-FALL, -3.0, -0.6, -EDGE]),
         high=np.array([FALL, 3.0, 0.6, EDGE]),
@@ -152,7 +151,7 @@ SPACES = SimpleNamespace(
 )
 CONFIG: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "fall_right": "increase",
         "fall_left": "decrease",
         "off_right": "decrease",
@@ -161,7 +160,7 @@ CONFIG: ShieldConfig = config_for(
 )
 BOUNDED: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "fall_right": ("increase", Bound("x0", above=FALL)),
         "fall_left": ("decrease", Bound("x0", below=-FALL)),
         "off_right": ("decrease", Bound("x3", above=EDGE)),

@@ -28,14 +28,13 @@ default (bench/heldout/README.md).
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import World
+from bench.worlds.harness import Spaces, World
 from client.shield.spaces import config_for
 
 DT = 1.0 / 12.0  # [h] a step of 5 min
@@ -150,7 +149,7 @@ class HeatingCurve:
 # What a new user writes (client.shield.config_for): the ranges the observation usually
 # takes, the boiler's range in 20 bins, and each failure with the direction of power that
 # moves away from it; the second adds where each failure lies.
-SPACES = SimpleNamespace(
+SPACES = Spaces(
     observation_space=Box(
         low=np.array([-5.0, -5.0, -20.0, 0.0]),
         high=np.array([40.0, 90.0, 20.0, 1.0]),
@@ -158,10 +157,10 @@ SPACES = SimpleNamespace(
     ),
     action_space=Box(low=0.0, high=POWER_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(SPACES, {"overheat": "decrease", "chill": "increase"})  # type: ignore[arg-type]
+CONFIG: ShieldConfig = config_for(SPACES, {"overheat": "decrease", "chill": "increase"})
 BOUNDED: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "overheat": ("decrease", Bound("x0", above=OVERHEAT)),
         "chill": ("increase", Bound("x0", below=CHILL)),
     },

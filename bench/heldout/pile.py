@@ -31,14 +31,13 @@ power. Held out: not used to choose any default (bench/heldout/README.md).
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import World
+from bench.worlds.harness import Spaces, World
 from client.shield.spaces import config_for
 
 DT = 0.5  # [s]
@@ -132,7 +131,7 @@ class Regulator:
 # What a new user writes (client.shield.config_for): the ranges the observation usually
 # takes, the rods' range in 20 bins, and each failure with the direction of reactivity that
 # moves away from it; the second adds where each failure lies.
-SPACES = SimpleNamespace(
+SPACES = Spaces(
     observation_space=Box(
         low=np.array([0.0, 250.0, 260.0, 0.0]),
         high=np.array([2.0, 360.0, 300.0, 1.5]),
@@ -140,10 +139,10 @@ SPACES = SimpleNamespace(
     ),
     action_space=Box(low=-RODS_MAX, high=RODS_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(SPACES, {"runaway": "decrease", "extinction": "increase"})  # type: ignore[arg-type]
+CONFIG: ShieldConfig = config_for(SPACES, {"runaway": "decrease", "extinction": "increase"})
 BOUNDED: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "runaway": ("decrease", Bound("x0", above=RUNAWAY)),
         "extinction": ("increase", Bound("x0", below=EXTINCTION)),
     },

@@ -47,14 +47,13 @@ the height above the ground and 60 m. Held out: not used to choose any default
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import World
+from bench.worlds.harness import Spaces, World
 from client.shield.spaces import config_for
 
 DT = 0.1  # [s]
@@ -210,7 +209,7 @@ class Autopilot:
 # What a new user writes (client.shield.config_for): the ranges the observation usually
 # takes, the elevator's range in 20 bins, and each failure with the direction of the elevator
 # that moves away from it; the second adds where each failure lies.
-SPACES = SimpleNamespace(
+SPACES = Spaces(
     observation_space=Box(
         low=np.array([NEGATIVE_STALL, -1.5, -8.0, 0.0]),
         high=np.array([STALL, 1.5, 8.0, CEILING]),
@@ -220,7 +219,7 @@ SPACES = SimpleNamespace(
 )
 CONFIG: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "stall": "decrease",
         "negative_stall": "increase",
         "ground": "increase",
@@ -229,7 +228,7 @@ CONFIG: ShieldConfig = config_for(
 )
 BOUNDED: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "stall": ("decrease", Bound("x0", above=STALL)),
         "negative_stall": ("increase", Bound("x0", below=NEGATIVE_STALL)),
         "ground": ("increase", Bound("x3", below=GROUND)),

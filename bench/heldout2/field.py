@@ -44,14 +44,13 @@ out: not used to choose any default (bench/heldout2/README.md).
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import World
+from bench.worlds.harness import Spaces, World
 from client.shield.spaces import config_for
 
 DT = 1.0  # [h] a step
@@ -197,7 +196,7 @@ class Irrigator:
 # What a new user writes (client.shield.config_for): the ranges the observation usually
 # takes, the drip lines' range in 20 bins, and each failure with the direction of watering
 # that moves away from it; the second adds where each failure lies.
-SPACES = SimpleNamespace(
+SPACES = Spaces(
     observation_space=Box(
         low=np.array([0.1, 0.05, 0.25, 0.0]),
         high=np.array([0.45, 0.45, 0.45, 1.2]),
@@ -205,10 +204,10 @@ SPACES = SimpleNamespace(
     ),
     action_space=Box(low=0.0, high=VALVE_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(SPACES, {"waterlogged": "decrease", "wilting": "increase"})  # type: ignore[arg-type]
+CONFIG: ShieldConfig = config_for(SPACES, {"waterlogged": "decrease", "wilting": "increase"})
 BOUNDED: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "waterlogged": ("decrease", Bound("x0", above=WATERLOGGED)),
         "wilting": ("increase", Bound("x0", below=WILTING)),
     },

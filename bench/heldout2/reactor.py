@@ -43,14 +43,13 @@ reactor's temperature and the set point, in K. Held out: not used to choose any 
 """
 
 import math
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import World
+from bench.worlds.harness import Spaces, World
 from client.shield.spaces import config_for
 
 DT = 10.0 / 60.0  # [min] a step of 10 s
@@ -187,7 +186,7 @@ class Regulator:
 # What a new user writes (client.shield.config_for): the ranges the observation usually
 # takes, the coolant's range in 20 bins, and each failure with the direction of coolant that
 # moves away from it; the second adds where each failure lies.
-SPACES = SimpleNamespace(
+SPACES = Spaces(
     observation_space=Box(
         low=np.array([QUENCH, 285.0, 0.5, SET_POINTS[0]]),
         high=np.array([RUNAWAY, 360.0, 1.5, SET_POINTS[1]]),
@@ -195,10 +194,10 @@ SPACES = SimpleNamespace(
     ),
     action_space=Box(low=0.0, high=FLOW_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(SPACES, {"runaway": "increase", "quench": "decrease"})  # type: ignore[arg-type]
+CONFIG: ShieldConfig = config_for(SPACES, {"runaway": "increase", "quench": "decrease"})
 BOUNDED: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "runaway": ("increase", Bound("x0", above=RUNAWAY)),
         "quench": ("decrease", Bound("x0", below=QUENCH)),
     },

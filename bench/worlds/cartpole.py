@@ -46,14 +46,13 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import plain_world
+from bench.worlds.harness import Spaces, plain_world
 from client.shield.spaces import config_for
 
 DT = 0.02  # [s]
@@ -176,7 +175,7 @@ class Balancer:
 # What a new user writes (client.shield.config_for): the ranges the observation usually
 # takes, the force's range in 20 bins, and each failure with the direction of force that
 # moves away from it; the second adds where each failure lies.
-SPACES = SimpleNamespace(
+SPACES = Spaces(
     observation_space=Box(
         low=np.array([-EDGE, -2.0, -FALL, -2.0, -TARGETS]),
         high=np.array([EDGE, 2.0, FALL, 2.0, TARGETS]),
@@ -186,7 +185,7 @@ SPACES = SimpleNamespace(
 )
 CONFIG: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "fall_right": "increase",
         "fall_left": "decrease",
         "off_right": "decrease",
@@ -195,7 +194,7 @@ CONFIG: ShieldConfig = config_for(
 )
 BOUNDED: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "fall_right": ("increase", Bound("x2", above=FALL)),
         "fall_left": ("decrease", Bound("x2", below=-FALL)),
         "off_right": ("decrease", Bound("x0", above=EDGE)),

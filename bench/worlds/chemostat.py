@@ -41,14 +41,13 @@ and the biomass asked, in g/L. A tuning world: defaults may be chosen on it
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import plain_world
+from bench.worlds.harness import Spaces, plain_world
 from client.shield.spaces import config_for
 
 DT = 0.05  # [h] a step of 3 min
@@ -157,16 +156,16 @@ class Regulator:
 # What a new user writes (client.shield.config_for): the ranges the observation usually
 # takes, the dilution's range in 20 bins, and each failure with the direction of dilution
 # that moves away from it; the second adds where each failure lies.
-SPACES = SimpleNamespace(
+SPACES = Spaces(
     observation_space=Box(
         low=np.array([0.0, 0.0, 15.0, 0.0]), high=np.array([8.0, 20.0, 25.0, 5.0]), dtype=np.float64
     ),
     action_space=Box(low=0.0, high=DILUTION_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(SPACES, {"bloom": "increase", "washout": "decrease"})  # type: ignore[arg-type]
+CONFIG: ShieldConfig = config_for(SPACES, {"bloom": "increase", "washout": "decrease"})
 BOUNDED: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "bloom": ("increase", Bound("x0", above=BLOOM)),
         "washout": ("decrease", Bound("x0", below=WASHOUT)),
     },

@@ -43,14 +43,13 @@ between the glucose and 6.5 mmol/L. A tuning world: defaults may be chosen on it
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import plain_world
+from bench.worlds.harness import Spaces, plain_world
 from client.shield.spaces import config_for
 
 DT = 5.0  # [min]
@@ -173,7 +172,7 @@ class Pump:
 # What a new user writes (client.shield.config_for): the ranges the observation usually
 # takes, the pump's range in 20 bins, and each failure with the direction of the rate that
 # moves away from it; the second adds where each failure lies.
-SPACES = SimpleNamespace(
+SPACES = Spaces(
     observation_space=Box(
         low=np.array([2.0, 0.0, 0.0, 0.0]),
         high=np.array([20.0, 10.0, 5.0, 100.0]),
@@ -181,10 +180,10 @@ SPACES = SimpleNamespace(
     ),
     action_space=Box(low=0.0, high=RATE_MAX, shape=(1,), dtype=np.float64),
 )
-CONFIG: ShieldConfig = config_for(SPACES, {"low": "decrease", "high": "increase"})  # type: ignore[arg-type]
+CONFIG: ShieldConfig = config_for(SPACES, {"low": "decrease", "high": "increase"})
 BOUNDED: ShieldConfig = config_for(
     SPACES,
-    {  # type: ignore[arg-type]
+    {
         "low": ("decrease", Bound("x0", below=LOW)),
         "high": ("increase", Bound("x0", above=HIGH)),
     },

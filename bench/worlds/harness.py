@@ -19,9 +19,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from app.core import Shield, ShieldConfig
+
+
+class Spaces(gym.Env[Any, Any]):
+    """An environment that is only its two spaces: all that ``config_for`` reads of a world
+    whose environment is built per seed."""
+
+    def __init__(self, observation_space: gym.Space[Any], action_space: gym.Space[Any]) -> None:
+        self.observation_space = observation_space
+        self.action_space = action_space
 
 
 @dataclass(frozen=True)

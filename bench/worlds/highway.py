@@ -53,7 +53,6 @@ import argparse
 import importlib
 import platform
 import time
-from types import SimpleNamespace
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -61,7 +60,7 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import ShieldConfig
-from bench.worlds.harness import World
+from bench.worlds.harness import Spaces, World
 from client.shield.spaces import config_for
 
 TARGET_SPEED = 34.0  # [m/s] the speed the controller tracks
@@ -202,15 +201,15 @@ def collision_or_too_slow(observation: Any, info: dict[str, Any]) -> str | None:
 # and each failure with the direction of acceleration that moves away from it. The spaces are
 # written out so that the configuration is built without highway-env installed;
 # tests/test_highway_world.py checks them against the environment's.
-SPACES = SimpleNamespace(
+SPACES = Spaces(
     observation_space=Box(-np.inf, np.inf, shape=(CARS, FEATURES), dtype=np.float32),
     action_space=Box(-1.0, 1.0, shape=(1,), dtype=np.float32),
 )
 LOW, HIGH = [-1.0] * (CARS * FEATURES), [1.0] * (CARS * FEATURES)
-CONFIG: ShieldConfig = config_for(SPACES, {"collision": "decrease"}, low=LOW, high=HIGH)  # type: ignore[arg-type]
+CONFIG: ShieldConfig = config_for(SPACES, {"collision": "decrease"}, low=LOW, high=HIGH)
 CONFIG_TOO_SLOW: ShieldConfig = config_for(
     SPACES,
-    {"collision": "decrease", "too_slow": "increase"},  # type: ignore[arg-type]
+    {"collision": "decrease", "too_slow": "increase"},
     low=LOW,
     high=HIGH,
 )

@@ -307,7 +307,7 @@ def test_bad_configuration_names_the_field(client: TestClient) -> None:
     assert r.status_code == 422 and r.json()["error"]["field"] == "config.clustering.rho"
     r = client.post("/models", json={"name": "x", "config": {"reviser": {"nois": "std"}}})
     assert r.json()["error"]["field"] == "config.reviser.nois"
-    bound = {
+    bound: dict[str, Any] = {
         "name": "collision",
         "direction": "decrease",
         "bound": {"observation": "gap", "below": 0},

@@ -87,14 +87,15 @@ def configs(draw: st.DrawFn) -> dict[str, Any]:
         section = draw(st.sampled_from(sorted(FIELDS)))
         name = draw(st.sampled_from(FIELDS[section]))
         value = draw(EXTREME)
+        setting: float | list[float] = value
         if (section, name) in LISTS:
             default = {
                 "low": [0.0, 0.0, 0.0],
                 "high": [32.0, 50.0, 32.0],
                 "knee": [0.0, 20.0, 0.0],
             }[name]
-            value = [*default[:1], value, *default[2:]]
-        config.setdefault(section, {})[name] = value
+            setting = [*default[:1], value, *default[2:]]
+        config.setdefault(section, {})[name] = setting
     if draw(st.booleans()):
         config.setdefault("reviser", {})["method"] = draw(st.sampled_from(["paper", "risk"]))
     if draw(st.booleans()):

@@ -4,6 +4,8 @@ codes and bodies the schema documents. Bounded: a few examples per operation."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import schemathesis
 from hypothesis import HealthCheck, settings
 from schemathesis.checks import not_a_server_error
@@ -17,5 +19,5 @@ schema = schemathesis.openapi.from_asgi("/openapi.json", create_app(Settings()))
 
 @schema.parametrize()
 @settings(max_examples=15, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
-def test_the_service_keeps_to_its_schema(case: schemathesis.Case) -> None:
+def test_the_service_keeps_to_its_schema(case: schemathesis.Case[Any]) -> None:
     case.call_and_validate(checks=[not_a_server_error, status_code_conformance])

@@ -45,11 +45,14 @@ class AutogradDDPG:
         self.critic.requires_grad_(False)
         actor_loss = -self.critic(batch.obs, self.actor(batch.obs)).mean()
         self.actor_opt.zero_grad()
-        actor_loss.backward()  # type: ignore[no-untyped-call]
+        actor_loss.backward()
         self.actor_opt.step()
         self.critic.requires_grad_(True)
         with torch.no_grad():
-            targets = [*self.actor_target.parameters(), *self.critic_target.parameters()]
+            targets: list[torch.Tensor] = [
+                *self.actor_target.parameters(),
+                *self.critic_target.parameters(),
+            ]
             torch._foreach_lerp_(targets, self.online(), cfg.tau)
 
     def moments(self, name: str) -> torch.Tensor:

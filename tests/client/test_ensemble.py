@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import pytest
@@ -235,7 +236,7 @@ def test_lockstep_is_for_ddpg_arms(tmp_path: Path) -> None:
     ("transport", "update_first"), [("batch", False), ("ws", False), ("batch", True)]
 )
 def test_lockstep_against_a_service_equals_lockstep_in_process(
-    tmp_path: Path, transport: str, update_first: bool
+    tmp_path: Path, transport: Literal["http", "ws", "batch"], update_first: bool
 ) -> None:
     """One round per lockstep step (over the batch route one request carrying a step of every
     run's model; over WebSocket every run's frame sent before any reply is read): each model
@@ -270,16 +271,18 @@ def test_dropping_members_leaves_the_others_learning_as_before(device: str) -> N
     for t in range(200):
         if t == 120:
             cut.keep([0, 2])  # run 1 is over
-            before, kept = full.state(), cut.state()  # the same so far, bit for bit
+            before, kept_state = full.state(), cut.state()  # the same so far, bit for bit
 
             def rows(flat: torch.Tensor) -> torch.Tensor:
                 shapes = [p.shape for p in [*full.actor, *full.critic]]
                 return torch.cat([v[[0, 2]].reshape(-1) for v in views(flat, shapes)])
 
             for name in ("online", "target"):
-                assert torch.equal(kept[name], rows(before[name]))
-            assert torch.equal(kept["moments"], torch.stack([rows(m) for m in before["moments"]]))
-            assert kept["moments"].abs().sum() > 0  # the Adam moments came along
+                assert torch.equal(kept_state[name], rows(before[name]))
+            assert torch.equal(
+                kept_state["moments"], torch.stack([rows(m) for m in before["moments"]])
+            )
+            assert kept_state["moments"].abs().sum() > 0  # the Adam moments came along
         kept = [0, 2] if t >= 120 else [0, 1, 2]
         a_full, a_cut = full.act(obs), cut.act(obs[kept])
         np.testing.assert_allclose(np.array(a_full)[kept], a_cut, atol=ACTION_TOLERANCE)

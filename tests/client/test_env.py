@@ -83,7 +83,7 @@ def test_reward_is_zero_at_the_ideal_point() -> None:
 
 
 def test_a_failure_penalty_lowers_the_reward_of_the_failing_step_only() -> None:
-    rewards = {}
+    rewards: dict[float, list[float]] = {}
     for penalty in (0.0, 60.0):
         env = CarFollowingEnv(
             lead=lead.synthetic(2),

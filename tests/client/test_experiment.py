@@ -304,7 +304,7 @@ def test_a_learner_that_updates_first_updates_while_the_shield_answers(update_fi
     from concurrent.futures import ThreadPoolExecutor
 
     alone = Sequenced(update_first)
-    runner.play(alone, alone, np.zeros(4, np.float32), alone)  # type: ignore[arg-type]
+    runner.play(alone, alone, np.zeros(4, np.float32), alone)
     expected = (
         ["act", "update", "step", "remember"]
         if update_first
@@ -319,7 +319,7 @@ def test_a_learner_that_updates_first_updates_while_the_shield_answers(update_fi
                 beside,
                 beside,
                 np.zeros(4, np.float32),
-                beside,  # type: ignore[arg-type]
+                beside,
                 pool=pool,
             )
         assert beside.met == [True, True]  # each saw the other start: they ran together

@@ -11,6 +11,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
@@ -28,7 +29,7 @@ from client.shield.retry import call_with_retry
 from tests.conftest import free_port
 
 PATIENT = Retry(attempts=400, backoff=0.1, max_backoff=0.3)  # a server starting under load
-STEP = {"observation": [10.0, 50.0, 12.0], "action": 0.5}
+STEP: dict[str, Any] = {"observation": [10.0, 50.0, 12.0], "action": 0.5}
 
 
 def serve(data: Path, port: int, delay: float = 0.0) -> subprocess.Popen[bytes]:

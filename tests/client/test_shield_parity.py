@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pytest
@@ -83,7 +83,9 @@ def test_the_wrapper_reports_and_applies_the_decision() -> None:
 
 @pytest.mark.parametrize("transport", ["http", "ws", "batch"])
 def test_runner_records_are_identical_in_process_and_over_the_network(
-    server: Server, transport: str, tmp_path_factory: pytest.TempPathFactory
+    server: Server,
+    transport: Literal["http", "ws", "batch"],
+    tmp_path_factory: pytest.TempPathFactory,
 ) -> None:
     import dataclasses
 
@@ -100,17 +102,17 @@ def test_runner_records_are_identical_in_process_and_over_the_network(
     )
     local_dir, remote_dir = tmp_path_factory.mktemp("local"), tmp_path_factory.mktemp("remote")
     runner.run_one(config, config.arms[0], 0, local_dir)
-    remote = dataclasses.replace(config, shield=server.url, transport=transport)  # type: ignore[arg-type]
+    remote = dataclasses.replace(config, shield=server.url, transport=transport)
     runner.run_one(remote, config.arms[0], 0, remote_dir)
 
-    def episodes(directory: Path) -> list[object]:
+    def episodes(directory: Path) -> list[records.EpisodeRecord]:
         return [
             dataclasses.replace(r, wall_s=0.0)
             for r in records.read(records.path_for(directory, config.arms[0], 0))[1]
         ]
 
     assert episodes(local_dir) == episodes(remote_dir)
-    assert sum(sum(r.interventions.values()) for r in episodes(local_dir)) > 0  # type: ignore[attr-defined]
+    assert sum(sum(r.interventions.values()) for r in episodes(local_dir)) > 0
 
 
 def test_ddpg_that_updates_first_records_the_same_in_process_and_over_the_network(
@@ -134,7 +136,7 @@ def test_ddpg_that_updates_first_records_the_same_in_process_and_over_the_networ
         model_prefix="first",
     )
 
-    def episodes(config: runner.ExperimentConfig) -> list[object]:
+    def episodes(config: runner.ExperimentConfig) -> list[records.EpisodeRecord]:
         out = tmp_path_factory.mktemp(config.transport)
         runner.run_one(config, config.arms[0], 0, out)
         return [
@@ -144,11 +146,11 @@ def test_ddpg_that_updates_first_records_the_same_in_process_and_over_the_networ
 
     local = episodes(config)
     for transport in ("http", "ws", "batch"):
-        remote = dataclasses.replace(config, shield=server.url, transport=transport)  # type: ignore[arg-type]
+        remote = dataclasses.replace(config, shield=server.url, transport=transport)
         assert episodes(remote) == local, transport
-    assert sum(sum(r.interventions.values()) for r in local) > 0  # type: ignore[attr-defined]
+    assert sum(sum(r.interventions.values()) for r in local) > 0
     usual = episodes(dataclasses.replace(config, ddpg={"warmup": 64}))
-    assert [r.episode_return for r in usual] != [r.episode_return for r in local]  # type: ignore[attr-defined]
+    assert [r.episode_return for r in usual] != [r.episode_return for r in local]
 
 
 def test_runs_spread_over_sidecars_keep_their_records(

@@ -46,6 +46,7 @@ def test_one_copy_decides_and_learns_as_the_single_wrapper_does() -> None:
         assert (terminated[0], truncated[0]) == (done, cut)
         resetting = bool(terminated[0] or truncated[0])
         episodes += resetting
+    assert isinstance(vector.shield, LocalShield) and isinstance(single.shield, LocalShield)
     assert episodes > 20 and vector.shield.shield.counters.interventions["edge"] > 0
     assert_same(vector.shield.shield.snapshot(), single.shield.shield.snapshot())
 
@@ -75,6 +76,7 @@ def test_evaluation_learns_nothing_and_the_seed_seeds_the_shield() -> None:
     runs = []
     for _ in range(2):
         envs = ShieldVectorWrapper(ledges(2), config=ledge_config())
+        assert isinstance(envs.shield, LocalShield)
         envs.reset(seed=11)
         rng = np.random.default_rng(2)
         runs.append([envs.step(pushes(rng, 2))[4]["applied_action"].tolist() for _ in range(300)])
@@ -97,6 +99,7 @@ def test_copies_in_worker_processes_share_the_model_in_this_one() -> None:
     rng = np.random.default_rng(4)
     for _ in range(100):
         envs.step(pushes(rng, 2))
+    assert isinstance(envs.shield, LocalShield)
     shield = envs.shield.shield
     assert shield.counters.steps >= 200 and shield.counters.episodes > 2
     envs.close()

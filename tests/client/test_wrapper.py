@@ -178,7 +178,8 @@ def test_gymnasium_vector_envs_take_the_wrapper_per_copy() -> None:
     import functools
 
     shared = LocalShield(config_for(Ledge(), EDGE))
-    gym.register("LedgeForTest-v0", entry_point=Ledge)
+    # gymnasium types entry_point as a callable of **kwargs: Any; it takes a class as well
+    gym.register("LedgeForTest-v0", entry_point=Ledge)  # type: ignore[arg-type]
     venv = gym.make_vec(
         "LedgeForTest-v0",
         num_envs=3,
@@ -386,7 +387,8 @@ def test_a_predicate_of_the_wrong_shape_is_refused_with_the_five_arguments() -> 
         match=r"failure\(observation, reward, terminated, "
         r"truncated, info\)",
     ):
-        ShieldWrapper(Ledge(), criteria=EDGE, failure=lambda info: info.get("crashed"))
+        # the wrong shape, deliberately: the refusal is under test
+        ShieldWrapper(Ledge(), criteria=EDGE, failure=lambda info: info.get("crashed"))  # type: ignore[arg-type,misc]
     yes_no = ShieldWrapper(Ledge(), criteria=EDGE, failure=lambda o, r, te, tr, info: te)  # type: ignore[arg-type,return-value]
     yes_no.reset(seed=0)
     with pytest.raises(TypeError, match="the name of the criterion that failed .* not False"):
@@ -394,7 +396,11 @@ def test_a_predicate_of_the_wrong_shape_is_refused_with_the_five_arguments() -> 
 
 
 def test_the_vector_wrapper_warns_as_the_wrapper_does() -> None:
-    gym.register("LedgeCrashedForTest-v0", entry_point=Ledge, kwargs={"key": "crashed"})
+    gym.register(
+        "LedgeCrashedForTest-v0",
+        entry_point=Ledge,  # type: ignore[arg-type]  # a class, as above
+        kwargs={"key": "crashed"},
+    )
     envs = ShieldVectorWrapper(
         gym.make_vec("LedgeCrashedForTest-v0", num_envs=2, vectorization_mode="sync"),
         config=ledge_config(),

@@ -34,7 +34,10 @@ def client() -> Iterator[TestClient]:
         yield c
 
 
-@pytest.fixture
-def strict_client() -> Iterator[TestClient]:
+del globals()["strict_client"]  # test_api's, imported above: the one below replaces it
+
+
+@pytest.fixture(name="strict_client")
+def sharded_strict_client() -> Iterator[TestClient]:
     with sharded_client(Settings(token="s3cret", max_body_bytes=4096, max_batch=3)) as c:
         yield c

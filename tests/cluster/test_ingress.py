@@ -261,7 +261,8 @@ def test_a_shard_streams_the_live_feed_and_ends_it_once_the_model_moved() -> Non
                         )
                     )
                 if len(parts) == 3:
-                    assert (await servers[home].move("default", 1 - home)).status == 200
+                    moved = await servers[home].move("default", 1 - home)
+                    assert isinstance(moved, asgi.Reply) and moved.status == 200
             return parts
 
         parts = asyncio.run(asyncio.wait_for(watch(), 30))

@@ -12,7 +12,9 @@ action feeds back into the world, so a single different decision changes the res
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -24,7 +26,7 @@ STEPS = 12_000
 EPISODE = 400  # steps before an episode ends without a failure
 # the default criteria without their bounds, as before bounds were declared
 UNBOUNDED = tuple(dataclasses.replace(c, bound=None) for c in ShieldConfig().criteria)
-PRESETS = {
+PRESETS: dict[str, Callable[[], ShieldConfig]] = {
     "default": ShieldConfig,
     "paper": ShieldConfig.paper,
     # the default before the reach and its bounds (recorded by the core at 6f6cc72,
@@ -41,12 +43,12 @@ def preset(name: str) -> ShieldConfig:
     )
 
 
-def drive(config: ShieldConfig, steps: int = STEPS, seed: int = 0) -> dict[str, npt.NDArray]:
+def drive(config: ShieldConfig, steps: int = STEPS, seed: int = 0) -> dict[str, npt.NDArray[Any]]:
     """Run the loop on a new shield of ``config`` (:func:`run`)."""
     return run(Shield(config), steps, seed)
 
 
-def run(shield: Shield, steps: int = STEPS, seed: int = 0) -> dict[str, npt.NDArray]:
+def run(shield: Shield, steps: int = STEPS, seed: int = 0) -> dict[str, npt.NDArray[Any]]:
     """Run the loop; per step the applied action, recognised state, state count, whether the
     step was revised, why and the verdict, and the closing snapshot's local risk weights (empty
     without the risk reviser)."""
@@ -100,5 +102,6 @@ if __name__ == "__main__":  # python -m tests.core.recorded [NAME ...]: those, o
     import sys
 
     for name in sys.argv[1:] or PRESETS:
-        np.savez_compressed(path(name), **drive(preset(name)))
+        # mypy matches the arrays against savez_compressed's allow_pickle: bool as well
+        np.savez_compressed(path(name), **drive(preset(name)))  # type: ignore[arg-type]
         print(f"wrote {path(name)}")  # noqa: T201

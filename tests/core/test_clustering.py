@@ -12,7 +12,7 @@ from tests.core import reference
 
 def direct_potential(z: np.ndarray, samples: list[np.ndarray]) -> float:
     """P_k(z) = 1 / (1 + mean_l ||z - z_l||^2) over the k-1 earlier samples (spec §2.2)."""
-    return 1.0 / (1.0 + np.mean([float(np.sum((z - s) ** 2)) for s in samples]))
+    return 1.0 / (1.0 + float(np.mean([float(np.sum((z - s) ** 2)) for s in samples])))
 
 
 def test_hand_computed_stream() -> None:

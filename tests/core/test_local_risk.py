@@ -3,6 +3,8 @@ follows the observation within a state, snapshots, bad configurations."""
 
 from __future__ import annotations
 
+from typing import TypedDict
+
 import numpy as np
 import pytest
 
@@ -12,9 +14,17 @@ from app.core.local_risk import PRIOR_COV, FloatArray, LocalRisk
 from tests.core.test_risk import crash_world
 from tests.utils import assert_same
 
+
+class Streams(TypedDict):
+    """LocalRisk's stream sizes."""
+
+    belief_size: int
+    max_streams: int
+
+
 LOCAL = {"risk": {"horizon": 4}}
 SAFE = np.array([-1, 1], dtype=np.int64)  # collision-like, then falling-behind-like
-ONE_STREAM = {"belief_size": 4, "max_streams": 1}  # every test stream in slot 0
+ONE_STREAM: Streams = {"belief_size": 4, "max_streams": 1}  # every test stream in slot 0
 
 
 def one_state(weight: float = 1.0) -> Belief:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Literal, cast
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -31,10 +33,13 @@ step = st.tuples(
     st.sampled_from([None, "collision", "large_distance"]),
 )
 streams = st.lists(step, min_size=1, max_size=60)
+Step = tuple[tuple[float, float, float], float, bool, str | None]
+Op = str | tuple[int, int, int]  # "grow", or (action, seed, seed)
+Expansion = Literal["prior", "zero_uniform", "zero_identity"]
 
 
-def feed(shield: Shield, steps: list) -> list:  # type: ignore[type-arg]
-    out = []
+def feed(shield: Shield, steps: list[Step]) -> list[tuple[object, ...]]:
+    out: list[tuple[object, ...]] = []
     for z, a, done, event in steps:
         d = shield.step(list(z), None if done else a, event=event, done=done)
         out.append((d.action, d.reason, d.state, d.n_states, d.threshold))
@@ -62,14 +67,14 @@ ops = st.lists(
 )
 
 
-def play(op: object, *models: TransitionModel) -> tuple[int, Belief, Belief] | None:
+def play(op: Op, *models: TransitionModel) -> tuple[int, Belief, Belief] | None:
     """One of ``ops`` on every model: a new state, or a transition between two random
     beliefs under an action (returned)."""
     if op == "grow":
         for model in models:
             model.add_state()
         return None
-    a, s1, s2 = op  # type: ignore[misc]
+    a, s1, s2 = cast(tuple[int, int, int], op)
     n = models[0].n_states
     tau = top_k(np.random.default_rng(s1).random(n), 4)
     gamma = top_k(np.random.default_rng(s2).random(n), 4)
@@ -79,8 +84,10 @@ def play(op: object, *models: TransitionModel) -> tuple[int, Belief, Belief] | N
 
 
 @given(ops, st.sampled_from(["prior", "zero_uniform", "zero_identity"]), st.floats(0.001, 0.5))
-def test_tpm_rows_stay_distributions_and_forms_agree(ops_list: list, mode: str, lr: float) -> None:  # type: ignore[type-arg]
-    cfg = TransitionConfig(learning_rate=lr, expansion=mode)  # type: ignore[arg-type]
+def test_tpm_rows_stay_distributions_and_forms_agree(
+    ops_list: list[Op], mode: Expansion, lr: float
+) -> None:
+    cfg = TransitionConfig(learning_rate=lr, expansion=mode)
     lazy, dense = LazyTransitions(3, cfg, 100), DenseTransitions(3, cfg)
     F, F_o = [np.zeros((0, 0))] * 3, [np.zeros(0)] * 3
     for op in ["grow", *ops_list]:
@@ -107,10 +114,10 @@ def test_tpm_rows_stay_distributions_and_forms_agree(ops_list: list, mode: str, 
     st.lists(st.integers(0, 40), max_size=3),
 )
 def test_lazy_scales_kept_per_row_equal_a_fresh_computation(
-    ops_list: list, mode: str, resets: list[int]
-) -> None:  # type: ignore[type-arg]
+    ops_list: list[Op], mode: Expansion, resets: list[int]
+) -> None:
     """The row scales that learning updates in place are what a restore computes anew."""
-    cfg = TransitionConfig(expansion=mode, on_replace="reset")  # type: ignore[arg-type]
+    cfg = TransitionConfig(expansion=mode, on_replace="reset")
     lazy = LazyTransitions(3, cfg, 100)
     for op in ["grow", *ops_list]:
         play(op, lazy)
@@ -133,12 +140,12 @@ def test_lazy_scales_kept_per_row_equal_a_fresh_computation(
     st.integers(0, 10**6),
 )
 def test_the_marginal_step_of_every_action_at_once_is_their_mean_bit_for_bit(
-    ops_list: list, mode: str, k: int, seed: int
-) -> None:  # type: ignore[type-arg]
+    ops_list: list[Op], mode: Expansion, k: int, seed: int
+) -> None:
     """The two-step prediction's one pass over all actions gives the numbers of Eq. 7 as
     written (Eq. 5 per action, summed in action order), so that runs do not change with it;
     and the dense backend's marginal within round-off."""
-    cfg = TransitionConfig(expansion=mode)  # type: ignore[arg-type]
+    cfg = TransitionConfig(expansion=mode)
     lazy, dense = LazyTransitions(3, cfg, 100), DenseTransitions(3, cfg)
     for op in ["grow", *ops_list]:
         play(op, lazy, dense)
@@ -153,7 +160,7 @@ def test_the_marginal_step_of_every_action_at_once_is_their_mean_bit_for_bit(
 
 @pytest.mark.slow  # Hypothesis: seconds
 @given(streams)
-def test_invariants_hold_on_any_stream(steps: list) -> None:  # type: ignore[type-arg]
+def test_invariants_hold_on_any_stream(steps: list[Step]) -> None:
     shield = Shield(ShieldConfig(limits=LimitsConfig(belief_top_k=4)))
     sizes = []
     for z, a, done, event in steps:
@@ -165,7 +172,7 @@ def test_invariants_hold_on_any_stream(steps: list) -> None:  # type: ignore[typ
 
 @pytest.mark.slow  # Hypothesis: seconds
 @given(streams, streams)
-def test_snapshot_restore_gives_the_same_decisions(first: list, then: list) -> None:  # type: ignore[type-arg]
+def test_snapshot_restore_gives_the_same_decisions(first: list[Step], then: list[Step]) -> None:
     shield = Shield(ShieldConfig())
     feed(shield, first)
     restored = Shield.from_snapshot(shield.snapshot())
@@ -175,7 +182,7 @@ def test_snapshot_restore_gives_the_same_decisions(first: list, then: list) -> N
 
 @pytest.mark.slow  # Hypothesis: seconds
 @given(streams, st.integers(0, 2**32))
-def test_same_seed_same_model(steps: list, seed: int) -> None:  # type: ignore[type-arg]
+def test_same_seed_same_model(steps: list[Step], seed: int) -> None:
     config = ShieldConfig.from_dict({"reviser": {"seed": seed, "activate_after_episodes": 0}})
     a, b = Shield(config), Shield(config)
     assert feed(a, steps) == feed(b, steps)
@@ -184,7 +191,9 @@ def test_same_seed_same_model(steps: list, seed: int) -> None:  # type: ignore[t
 
 @pytest.mark.slow  # Hypothesis: seconds
 @given(streams, observation, st.floats(-2, 2))
-def test_learn_false_and_inputs_are_left_untouched(steps: list, z: tuple, a: float) -> None:  # type: ignore[type-arg]
+def test_learn_false_and_inputs_are_left_untouched(
+    steps: list[Step], z: tuple[float, float, float], a: float
+) -> None:
     shield = Shield()
     feed(shield, steps)
     before = shield.snapshot()

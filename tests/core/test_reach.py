@@ -3,6 +3,8 @@ continuation, and the decision that asks it before the local model."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -330,7 +332,7 @@ def test_a_snapshot_with_a_bad_failure_point_count_is_refused() -> None:
         {"reach_radius": float("nan")},
     ],
 )
-def test_bad_reach_settings_are_refused_naming_the_field(risk_section: dict) -> None:
+def test_bad_reach_settings_are_refused_naming_the_field(risk_section: dict[str, Any]) -> None:
     with pytest.raises(InvalidConfig) as error:
         ShieldConfig.from_dict({"risk": risk_section})
     assert error.value.field == f"risk.{next(iter(risk_section))}"
@@ -401,9 +403,9 @@ def test_a_configuration_stored_before_the_reach_loads_without_it() -> None:
     ],
 )
 def test_bad_bounds_are_refused_naming_the_field(
-    criteria: list | None, observation: dict, field: str
+    criteria: list[Any] | None, observation: dict[str, Any], field: str
 ) -> None:
-    data: dict = {"observation": observation}
+    data: dict[str, Any] = {"observation": observation}
     if criteria is not None:
         data["criteria"] = criteria
     with pytest.raises(InvalidConfig) as error:

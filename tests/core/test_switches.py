@@ -34,7 +34,7 @@ def paper_reviser(**options: Any) -> ReviserConfig:
     return ReviserConfig(method="paper", **options)
 
 
-def shield_with(**sections: object) -> Shield:
+def shield_with(**sections: Any) -> Shield:
     return Shield(dataclasses.replace(cliff_config(), **sections))
 
 
@@ -61,7 +61,7 @@ def test_a2_ets_plus_makes_a_state_for_a_novel_outlier_and_ets2004_does_not() ->
     stream = [0.0, 0.02, 0.04, 1.0]
     counts = {}
     for rule in ("ets_plus", "ets2004"):
-        c = EvolvingClusterer(ClusteringConfig(creation_rule=rule), 1, 10)  # type: ignore[arg-type]
+        c = EvolvingClusterer(ClusteringConfig(creation_rule=rule), 1, 10)
         for z in stream:
             c.learn_one(np.array([z]))
         counts[rule] = c.n_states
@@ -71,7 +71,7 @@ def test_a2_ets_plus_makes_a_state_for_a_novel_outlier_and_ets2004_does_not() ->
 def test_a3_pad_learns_the_transition_into_a_brand_new_state() -> None:
     rows = {}
     for mode in ("skip", "pad"):
-        shield = shield_with(transitions=TransitionConfig(on_new_state=mode))  # type: ignore[arg-type]
+        shield = shield_with(transitions=TransitionConfig(on_new_state=mode))
         shield.step([0.0], 0.5)
         shield.step([0.0], 0.5)
         assert shield.step([1.0], 0.5).new_state
@@ -131,7 +131,7 @@ def test_a4_rate_flags_are_not_diluted_by_a_long_stay() -> None:
 
 def diffuse_prediction_shield(rule: str) -> Shield:
     """State 0 favourable, state 1 flagged; untried actions predict 50/50."""
-    shield = shield_with(reviser=paper_reviser(inspect=rule, activate_after_episodes=0))  # type: ignore[arg-type]
+    shield = shield_with(reviser=paper_reviser(inspect=rule, activate_after_episodes=0))
     shield.step([0.0], 0.0)
     shield.step([0.0], 0.0)
     shield.step([1.0], None, event="collision", done=True)
@@ -148,9 +148,7 @@ def test_a6_literal_search_runs_below_the_hardest_braking() -> None:
     actions = {}
     for mode in ("fixed", "literal"):
         shield = shield_with(
-            reviser=paper_reviser(  # type: ignore[arg-type]
-                search=mode, activate_after_episodes=0, noise="std", noise_k=1e6
-            )
+            reviser=paper_reviser(search=mode, activate_after_episodes=0, noise="std", noise_k=1e6)
         )
         for _ in range(4):  # four episodes: the noise std is 2 / 4e6, negligible
             shield.step([1.0], None, event="collision", done=True)
@@ -189,7 +187,7 @@ def test_one_sided_revisions_never_go_past_the_proposal_the_wrong_way(
 def test_a8_the_transition_is_learned_under_the_executed_or_the_proposed_action() -> None:
     changed = {}
     for source in ("executed", "proposed"):
-        shield = shield_with(transitions=TransitionConfig(action_source=source))  # type: ignore[arg-type]
+        shield = shield_with(transitions=TransitionConfig(action_source=source))
         shield.step([0.5], 0.0)
         state = shield.streams["0"]
         state.applied_bin, state.proposed_bin = 3, 17  # the reviser changed bin 17 into bin 3
@@ -204,7 +202,7 @@ def test_a8_the_transition_is_learned_under_the_executed_or_the_proposed_action(
 def test_a9_spread_definitions_differ() -> None:
     variances = {}
     for spread in ("radius", "member_variance", "ets2004"):
-        c = EvolvingClusterer(ClusteringConfig(epsilon=0.3, spread=spread), 1, 10)  # type: ignore[arg-type]
+        c = EvolvingClusterer(ClusteringConfig(epsilon=0.3, spread=spread), 1, 10)
         for z in (0.0, 0.1, 0.05):  # 0.1 joins state 0, 0.05 then moves it
             c.learn_one(np.array([z]))
         variances[spread] = float(c.variances()[0])
@@ -264,7 +262,7 @@ def test_a13_across_episodes_learns_the_reset_transition() -> None:
 def test_a16_reset_forgets_what_a_moved_state_had_learned() -> None:
     rows = {}
     for mode in ("keep", "reset"):
-        shield = shield_with(transitions=TransitionConfig(on_replace=mode))  # type: ignore[arg-type]
+        shield = shield_with(transitions=TransitionConfig(on_replace=mode))
         shield.step([1.0], 0.0)
         shield.step([1.0], 0.0)
         assert shield.step([0.0], -1.5).new_state  # state 1, left under bin 2 next

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+from typing import Literal
 
 import numpy as np
 import pytest
@@ -61,7 +62,9 @@ def test_first_state_gives_one_by_one_matrices() -> None:
 
 
 @pytest.mark.parametrize("mode", ["prior", "zero_uniform", "zero_identity"])
-def test_lazy_equals_dense_equals_literal_on_a_random_history(mode: str) -> None:
+def test_lazy_equals_dense_equals_literal_on_a_random_history(
+    mode: Literal["prior", "zero_uniform", "zero_identity"],
+) -> None:
     rng = np.random.default_rng(7)
     cfg = TransitionConfig(learning_rate=0.05, expansion=mode)
     q = 4

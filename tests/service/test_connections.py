@@ -57,12 +57,12 @@ def until_closed(sockets: list[socket.socket], seconds: float) -> dict[socket.so
         deadline = time.monotonic() + seconds
         while selector.get_map() and time.monotonic() < deadline:
             for key, _ in selector.select(timeout=0.1):
-                s = key.fileobj
-                assert isinstance(s, socket.socket)
-                chunk = s.recv(65536)
-                received[s] += chunk
+                ready = key.fileobj
+                assert isinstance(ready, socket.socket)
+                chunk = ready.recv(65536)
+                received[ready] += chunk
                 if not chunk:
-                    selector.unregister(s)
+                    selector.unregister(ready)
         assert not selector.get_map(), f"{len(selector.get_map())} sockets still open"
     return received
 

@@ -10,6 +10,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
@@ -140,7 +141,7 @@ def test_a_shield_that_never_answers_a_step_times_out() -> None:
 
 def test_the_clients_steps_carry_the_token(tmp_path: Path) -> None:
     server = start_server(tmp_path / "data", "--token", "secret")
-    step = {"observation": [10.0, 50.0, 12.0], "action": 0.5}
+    step: dict[str, Any] = {"observation": [10.0, 50.0, 12.0], "action": 0.5}
     try:
         with ShieldClient(server.url, token="secret") as shield:
             assert shield.revise(**step).model_version == 1

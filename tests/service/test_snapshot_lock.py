@@ -10,7 +10,6 @@ from typing import Any
 import pytest
 
 from app.service import codec
-from app.service import registry as registry_module
 from app.service.registry import ModelRegistry, Step
 from tests.utils import assert_same, random_stream
 
@@ -33,7 +32,7 @@ def test_steps_go_on_while_a_snapshot_is_written(
         overlapped.append(stepped.wait(10))  # other steps finish while this one writes
         return original(data)
 
-    monkeypatch.setattr(registry_module.codec, "to_npz", slow)
+    monkeypatch.setattr(codec, "to_npz", slow)  # the module the registry calls
     batch = steps(1, 60)
     writer = threading.Thread(target=lambda: [registry.step("default", s) for s in batch[:20]])
     writer.start()
@@ -43,7 +42,7 @@ def test_steps_go_on_while_a_snapshot_is_written(
     stepped.set()
     writer.join()
     assert overlapped == [True]
-    monkeypatch.setattr(registry_module.codec, "to_npz", original)
+    monkeypatch.setattr(codec, "to_npz", original)
     for step in batch[40:]:
         registry.step("default", step)
     expected = registry.get("default").shield.snapshot()
