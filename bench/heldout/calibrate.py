@@ -13,9 +13,15 @@ import argparse
 import platform
 import subprocess
 from collections import Counter
+from collections.abc import Callable, Sequence
 
 from bench.heldout import NAMES, world
-from bench.worlds.harness import run
+from bench.worlds.harness import World, run
+
+
+def kinds_text(failures: dict[str, int]) -> str:
+    """Failures by kind, ``chill 35, overheat 39``."""
+    return ", ".join(f"{kind} {count}" for kind, count in sorted(failures.items()))
 
 
 def seed_list(text: str) -> list[int]:
@@ -27,8 +33,14 @@ def seed_list(text: str) -> list[int]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--worlds", default=",".join(NAMES))
+    calibrate(NAMES, world, __doc__.splitlines()[0])
+
+
+def calibrate(names: Sequence[str], world: Callable[[str], World], description: str) -> None:
+    """The command line of a set of held-out worlds (``names``, ``world(name)``): each
+    controller alone, per world and seed, as a Markdown table."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--worlds", default=",".join(names))
     parser.add_argument("--seeds", default="2000-2008")
     parser.add_argument("--episodes", type=int, default=250)
     parser.add_argument("--warmup", type=int, default=50)
@@ -66,7 +78,7 @@ def main() -> None:
                 f"| {name} | {seed} | {early['total']} | {late['total']} | "
                 f"{late['total'] / late['episodes']:.1%} | "
                 f"{(early['total'] + late['total']) / args.episodes:.1%} | "
-                f"{', '.join(f'{k} {v}' for k, v in sorted(late['failures'].items()))} |",
+                f"{kinds_text(late['failures'])} |",
                 flush=True,
             )
         episodes = (args.episodes - args.warmup) * len(seeds)
@@ -74,7 +86,7 @@ def main() -> None:
             f"| **{name}** | all | {early_total} | {late_total} | "
             f"**{late_total / episodes:.1%}** | "
             f"**{(early_total + late_total) / (args.episodes * len(seeds)):.1%}** | "
-            f"{', '.join(f'{k} {v}' for k, v in sorted(kinds.items()))} |",
+            f"{kinds_text(dict(kinds))} |",
             flush=True,
         )
 
