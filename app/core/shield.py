@@ -539,7 +539,10 @@ class Shield:
             state.applied_bin = actions.encode(decision.action, cfg.action)
         state.step += 1
         if self._by_risk:
-            self.record.note(step.stream, recognised, decision.action != step.action)
+            spared = 1.0
+            for value in decision.risk.values():
+                spared *= 1.0 - value
+            self.record.note(step.stream, recognised, decision.action != step.action, 1.0 - spared)
         if decision.revised and not decision.shadow:
             self.counters.interventions[decision.verdict] += 1
         return decision
