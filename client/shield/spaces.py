@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from app.core import ActionSpec, Bound, Criterion, ObservationSpec, ShieldConfig
+from app.core.config import MIN_SPAN
 
 DEFAULT_BINS = 20
 SAMPLE_MARGIN = 0.1  # a sample's range widens by this share of its span on each side
@@ -171,7 +172,8 @@ def sample_range(
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Each observation number's range in a sample (rows of ``size`` numbers, or of any shape
     holding ``size``), widened by :data:`SAMPLE_MARGIN` of its span on each side; a number
-    that never varied gets a span of its magnitude (at least 1)."""
+    that never varied, or by less than the narrowest range a configuration accepts, gets a
+    span of its magnitude (at least 1)."""
     try:
         sample = np.asarray(observations, dtype=np.float64)
     except (TypeError, ValueError) as error:
@@ -190,8 +192,8 @@ def sample_range(
             "the sample of observations holds numbers that are not finite", "observations"
         )
     lows, highs = sample.min(axis=0), sample.max(axis=0)
-    span = highs - lows
-    span = np.where(span > 0, span, np.maximum(np.abs(lows), 1.0))
+    span = highs - lows  # (one narrower than the configuration accepts counts as none)
+    span = np.where(span >= MIN_SPAN, span, np.maximum(np.abs(lows), 1.0))
     return lows - SAMPLE_MARGIN * span, highs + SAMPLE_MARGIN * span
 
 

@@ -436,6 +436,9 @@ def test_a_sample_of_observations_gives_the_range_widened_by_the_margin() -> Non
     config = config_for(env, EDGE, observations=sample)
     assert config.observation.low == pytest.approx((0.2 - SAMPLE_MARGIN * 0.4, 5.0 - 5.0 * 0.1))
     assert config.observation.high == pytest.approx((0.6 + SAMPLE_MARGIN * 0.4, 5.0 + 5.0 * 0.1))
+    # a number that varies by a rounding error only counts as one that never varied
+    nearly = config_for(env, EDGE, observations=sample + [[0.0, 0.0], [0.0, 1e-9], [0.0, 0.0]])
+    assert nearly.observation.high[1] == pytest.approx(5.0 + 5.0 * 0.1)
     # low=/high= win over the sample, per bound
     mixed = config_for(env, EDGE, observations=sample, high=[1.0, 9.0])
     assert mixed.observation.high == (1.0, 9.0)
