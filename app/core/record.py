@@ -141,8 +141,9 @@ class Record:
         return np.array([self.backs_off(i) for i in range(self.counts.shape[0])], dtype=bool)
 
     def snapshot(self) -> dict[str, Any]:
-        """The counts, and each stream's pending steps (streams named in order, their lengths,
-        then states and whether revised, concatenated)."""
+        """The counts (per state, and per band of predicted risk), and each stream's pending
+        steps (streams named in order, their lengths, then states, whether revised and their
+        bands, concatenated)."""
         names = [name for name, pending in self._pending.items() if pending]
         steps = [step for name in names for step in self._pending[name]]
         return {

@@ -119,6 +119,8 @@ def test_a_shield_whose_revisions_fail_backs_off_says_so_and_keeps_its_record() 
         (lambda r: r.__setitem__("counts", r["counts"][:, :2]), "record.counts"),
         (lambda r: r.__setitem__("streams", ["nobody"]), "record.streams"),
         (lambda r: r["states"].__setitem__(slice(None), 10**6), "record.states"),
+        (lambda r: r["bands"].__setitem__((0, REVISED_FAILED), 10**6), "record.bands"),
+        (lambda r: r["risk_bands"].__setitem__(slice(None), 9), "record.risk_bands"),
     ],
 )
 def test_a_damaged_record_is_refused_naming_its_field(change: object, field: str) -> None:
