@@ -207,6 +207,12 @@ class Record:
             | (bands[:, PASSED_FAILED] > bands[:, PASSED])
         ).any():
             raise InvalidSnapshot("more failed steps than steps in a band", field="record.bands")
+        if bands.any() and not np.array_equal(
+            bands.sum(axis=0), counts[:, : PASSED_FAILED + 1].sum(axis=0)
+        ):
+            raise InvalidSnapshot(
+                "the bands count other steps than the states", field="record.bands"
+            )
         risk_bands = stored.ints(
             data.get("risk_bands", np.zeros(total, dtype=np.int64)),
             "record.risk_bands",

@@ -102,6 +102,10 @@ def test_a_shield_whose_revisions_fail_backs_off_says_so_and_keeps_its_record() 
     shield = backing_off_shield()
     counts = shield.record.counts
     assert counts[:, REVISED_FAILED].sum() > 0 and shield.record.backed_off().any()
+    # the same settled steps, by state and by band of the proposal's predicted risk
+    bands = shield.record.bands
+    assert np.array_equal(bands.sum(axis=0), counts[:, : PASSED_FAILED + 1].sum(axis=0))
+    assert np.count_nonzero(bands.sum(axis=1)) > 1
     backed = [shield.step([float(x), 5.0, 1.0], 2.0, learn=False) for x in np.linspace(0, 1, 21)]
     held = [d for d in backed if d.reason == "backed_off"]
     assert held and all(
@@ -121,6 +125,7 @@ def test_a_shield_whose_revisions_fail_backs_off_says_so_and_keeps_its_record() 
         (lambda r: r["states"].__setitem__(slice(None), 10**6), "record.states"),
         (lambda r: r["bands"].__setitem__((0, REVISED_FAILED), 10**6), "record.bands"),
         (lambda r: r["risk_bands"].__setitem__(slice(None), 9), "record.risk_bands"),
+        (lambda r: r["bands"].__setitem__((0, PASSED), 10**6), "record.bands"),
     ],
 )
 def test_a_damaged_record_is_refused_naming_its_field(change: object, field: str) -> None:
