@@ -1,0 +1,33 @@
+"""A third set of held-out worlds for issue #68, one of each kind it names, of other physics
+than the first two sets (``bench/heldout``, ``bench/heldout2``) and than the tuning worlds: a
+slow failure on either side of one action (:mod:`~bench.heldout3.anaesthesia`), an unstable
+system whose saving direction depends on the state (:mod:`~bench.heldout3.trailer`), and a
+runaway and an extinction on either side of an unstable operating point
+(:mod:`~bench.heldout3.fusion`).
+
+Each module gives the environment, its fixed controller and two
+:class:`~bench.worlds.harness.World` records that :func:`bench.worlds.harness.run` runs:
+``WORLD``, configured as a new user would with a direction per criterion, and
+``WORLD_BOUNDED``, the same with a bound per failure. The controllers were calibrated alone;
+README.md beside this module gives the rule that keeps these worlds held out.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from bench.worlds.harness import World
+
+NAMES = ("anaesthesia", "trailer", "fusion")
+
+
+def world(name: str, bounded: bool = False) -> World:
+    """The held-out world ``name`` of the third set, with a bound per failure when
+    ``bounded``."""
+    if name not in NAMES:
+        raise ValueError(
+            f"no held-out world {name!r} in the third set; there are {', '.join(NAMES)}"
+        )
+    module = importlib.import_module(f"bench.heldout3.{name}")
+    found: World = module.WORLD_BOUNDED if bounded else module.WORLD
+    return found
