@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from bench.worlds.__main__ import world_named
-from bench.worlds.harness import compare, run, summary_line
+from bench.worlds.harness import compare, controller_seed, run, summary_line
 
 WORLDS = ["braking_lead", "pendulum", "wall", "lane"]
 
@@ -48,6 +50,23 @@ def test_compare_is_deterministic() -> None:
     first = compare(world, [3], episodes=8, warmup=2)
     assert first == compare(world, [3], episodes=8, warmup=2)
     assert first["alone"] == sum(first["runs"][0]["alone"]["failures"].values())
+
+
+def test_each_episode_builds_its_controller_from_the_seed_and_the_episode_alone() -> None:
+    # common random numbers: an episode's controller does not depend on the episodes before
+    # it, so an episode the shield leaves alone is the controller's own episode
+    base = world_named("heldout_bicycle")
+    built: list[int] = []
+
+    def controller(seed: int) -> Any:
+        built.append(seed)
+        return base.controller(seed)
+
+    world = dataclasses.replace(base, controller=controller)
+    run(world, seed=3, episodes=4, warmup=0, config=None)
+    run(world, seed=3, episodes=4, warmup=0, config=world.config)
+    assert built == [controller_seed(3, episode) for episode in range(4)] * 2
+    assert len(set(built)) == 4 and controller_seed(4, 0) not in built
 
 
 @pytest.mark.parametrize("name", ["tuning_sluggish", "tuning_collapsed_plain"])

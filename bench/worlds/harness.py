@@ -6,7 +6,8 @@ the non-learning controller, ``config`` the shield configuration a user would wr
 ``event(observation, info)`` the failure of a step (or None). An episode that fails ends there.
 The shield learns from the first episode and revises from the episode its configuration says
 (``reviser.activate_after_episodes``); failures are counted over the episodes after the
-warm-up, per criterion, with and without the shield, on the same environment seeds, and within
+warm-up, per criterion, with and without the shield, each episode from the same seeds
+(:func:`controller_seed`), and within
 the warm-up too (the shield must cost nothing while it learns), beside the share of steps it
 revised and the controller's own task figure (a shield that takes the task over has failed).
 """
@@ -79,7 +80,6 @@ def run(
     the controller's own task figure, the mean of ``info["task"]`` per step where the world
     reports one (lower is better; None where it reports none)."""
     env = world.make(seed)
-    act = world.controller(seed)
     shield = None
     if config is not None:
         shield = Shield(config)
@@ -90,8 +90,9 @@ def run(
     tasks = 0
     for episode in range(episodes):
         observation, info = env.reset(seed=seed * 100_003 + episode)
+        act = world.controller(controller_seed(seed, episode))
         if hasattr(act, "reset"):
-            act.reset()  # a controller with memory starts each episode afresh
+            act.reset()
         counted = episode >= warmup
         for _ in range(world.max_steps):
             proposed = float(act(observation))
@@ -132,6 +133,16 @@ def run(
         "task": task / tasks if tasks else None,
         "states": None if shield is None else shield.n_states,
     }
+
+
+def controller_seed(seed: int, episode: int) -> int:
+    """The seed of the controller of one episode of a run. Each episode builds its controller
+    afresh from ``(seed, episode)``, as its environment resets from them: an episode the shield
+    leaves alone is then the same episode as the controller's alone, whatever happened before
+    it, and the shielded and the lone run differ only where the shield acted (common random
+    numbers; a controller drawing from one generator over the whole run would make every
+    episode after the first revision a different lottery)."""
+    return int(np.random.SeedSequence((seed, episode)).generate_state(1)[0])
 
 
 def ratio(shielded: int, alone: int) -> float | None:
