@@ -38,6 +38,13 @@ def integer(value: Any, field: str, low: int = 0, high: int | None = None) -> in
     return number
 
 
+def boolean(value: Any, field: str) -> bool:
+    """A true or false (numbers are refused)."""
+    if not isinstance(value, bool | np.bool_):
+        raise InvalidSnapshot("expected true or false", field=field)
+    return bool(value)
+
+
 def real(value: Any, field: str, low: float = -MAX_STORED, high: float = MAX_STORED) -> float:
     """A finite number in ``[low, high]``."""
     if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):

@@ -36,10 +36,9 @@ from app.core.lazy_tpm import LazyTransitions
 from app.core.local_risk import LocalRisk
 from app.core.observation import ObservationSpace
 from app.core.observation import check as check_observation
-from app.core.record import COLUMNS as RECORD_COLUMNS
-from app.core.record import PASSED, REVISED, Record
 from app.core.step import learn_and_decide, observe
 from app.core.tpm import DenseTransitions, TransitionModel
+from app.core.trial import AUDITED, LONGEST, NONE, Trial
 
 FloatArray = npt.NDArray[np.float64]
 SNAPSHOT_FORMAT = 4
@@ -217,6 +216,8 @@ class StreamState:
     step: int = 0
     recognised: int = -1  # the belief's most likely state, -1 without a belief
     z: FloatArray | None = None  # the normalised observation behind ``belief``
+    arm: int = NONE  # the episode's arm in the shield's trial of itself (:mod:`app.core.trial`)
+    failed: bool = False  # whether a failure happened in the episode so far
 
 
 @dataclass
@@ -274,7 +275,7 @@ class Shield:
             cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria), cfg.reviser.flag_min_rate
         )
         self.local_risk = self._new_local_risk()
-        self.record = Record(self._record_window())
+        self.trial = Trial(cfg.reviser.seed)
         self.streams: dict[str, StreamState] = {}  # least recently stepped first
         self._free_slots: list[int] = []  # slots of streams that ended, reused first
         self._model_arrays: tuple[Any, ...] = ()  # see _arrays
@@ -302,11 +303,6 @@ class Shield:
             cfg.risk.reach_radius,
             self._bounds(),
         )
-
-    def _record_window(self) -> int:
-        """The steps within which a failure counts against a decision in the shield's own
-        record (:mod:`app.core.record`): the farther of the risk's horizon and the reach's."""
-        return max(self.config.risk.horizon, self.config.risk.reach_horizon)
 
     def _bounds(self) -> FloatArray:
         """The criteria's bounds in the clustering space (:func:`app.core.reach.no_bounds`'s
@@ -485,8 +481,8 @@ class Shield:
             self.transitions.reset_row(at)  # A16
         belief = Belief(index, prob) if m == size else Belief(index[:m], prob[:m])
         state = self._stream(step.stream)
-        if self._by_risk and (step.event is not None or step.done):
-            self.record.settle(step.stream, step.event is not None)
+        if self._by_risk:
+            self._enter_trial(state, step)
         decide = self._by_risk and not step.done
         by_bin, verdicts = _NO_RISKS, _NO_VERDICTS
         if decide:
@@ -502,6 +498,7 @@ class Shield:
 
         if step.done:
             self.counters.episodes += 1
+            self.trial.count(state.arm, state.failed)
             self.history.record(self._totals())
             closing = self._closing(step, recognised, is_new, state.step)
             if cfg.transitions.across_episodes:  # A13 literal: the next reset is learned
@@ -538,11 +535,6 @@ class Shield:
         else:
             state.applied_bin = actions.encode(decision.action, cfg.action)
         state.step += 1
-        if self._by_risk:
-            spared = 1.0
-            for value in decision.risk.values():
-                spared *= 1.0 - value
-            self.record.note(step.stream, recognised, decision.action != step.action, 1.0 - spared)
         if decision.revised and not decision.shadow:
             self.counters.interventions[decision.verdict] += 1
         return decision
@@ -604,6 +596,29 @@ class Shield:
             self.flags.changed()
         return decided, limit, worst, final, kept
 
+    def _enter_trial(self, state: StreamState, step: StepInput) -> None:
+        """The stream's episode in the shield's trial of itself (:mod:`app.core.trial`): its
+        arm drawn on its first step, once a failure was learned and an episode has ended (and
+        the reviser is active); an audit ended when it runs too long; a failure noted."""
+        counters = self.counters
+        if state.step == 0:
+            state.arm, state.failed = NONE, False
+            local = self.local_risk
+            if (
+                not step.done
+                and counters.episodes > 0
+                and local is not None
+                and local.any_failure
+                and counters.episodes >= self.config.reviser.activate_after_episodes
+            ):
+                state.arm = self.trial.draw(counters.steps)
+        elif state.arm == AUDITED and state.step > LONGEST * counters.steps / max(
+            counters.episodes, 1
+        ):
+            state.arm = NONE
+        if step.event is not None:
+            state.failed = True
+
     def _transition_bin(self, state: StreamState, is_new: bool, applied_bin: int) -> int:
         """The action behind the stream's transition into this step, or -1 when none is
         learned."""
@@ -647,7 +662,6 @@ class Shield:
         slot = self.streams.pop(name).slot
         if self.local_risk is not None:
             self.local_risk.forget(slot)
-        self.record.forget(name)
         self._free_slots.append(slot)
 
     def _add_state(self) -> None:
@@ -656,7 +670,6 @@ class Shield:
         self.flags.add_state()
         if self.local_risk is not None:
             self.local_risk.add_state()
-            self.record.add_state()
 
     def _arrays(self) -> tuple[Any, ...]:
         """The settings and arrays :func:`~app.core.step.learn_and_decide` takes before the
@@ -926,9 +939,9 @@ class Shield:
                 reason = "inactive"
             elif kept:
                 reason = "pass"
-            elif self.record.backs_off(recognised):
-                # its revisions here were followed by more failures than the proposals
-                suggested, reason = self._bin_actions[final], "backed_off"
+            elif (stream := self.streams.get(step.stream)) is not None and stream.arm == AUDITED:
+                # an episode the shield leaves to the controller, to compare (app.core.trial)
+                suggested, reason = self._bin_actions[final], "audit"
             else:
                 way = 1 if final > start else -1
                 candidates = RiskCandidates(
@@ -981,23 +994,7 @@ class Shield:
             "entries": self.flags.entries.copy(),
             "failures": self.flags.failures.copy(),
             "support": self.clusterer.support,
-            "record": self._record_counts(),
-            "backed_off": self._backed_off(),
         }
-
-    def _record_counts(self) -> npt.NDArray[np.int64]:
-        """The shield's own record per state (:data:`app.core.record.COLUMNS`): zeros for the
-        paper's reviser, which keeps none."""
-        if self.local_risk is None:
-            return np.zeros((self.n_states, len(RECORD_COLUMNS)), dtype=np.int64)
-        return self.record.counts.copy()
-
-    def _backed_off(self) -> npt.NDArray[np.bool_]:
-        """Per state, whether the risk reviser passes proposals there because its revisions
-        were followed by more failures than the proposals (:mod:`app.core.record`)."""
-        if self.local_risk is None:
-            return np.zeros(self.n_states, dtype=bool)
-        return self.record.backed_off()
 
     def failure_points(self) -> dict[str, FloatArray]:
         """Per criterion, the observations (physical units) where the reach keeps its
@@ -1011,8 +1008,8 @@ class Shield:
         }
 
     def state_view(self, index: int) -> dict[str, Any]:
-        """One state: centre in physical units, spread, flag, visits, entries, failures by
-        criterion, and the shield's own record there (:mod:`app.core.record`)."""
+        """One state: centre in physical units, spread, flag, visits, entries and failures by
+        criterion."""
         names = [None] + [c.name for c in self.config.criteria]
         failures = self.flags.failures[index]
         return {
@@ -1025,8 +1022,6 @@ class Shield:
             "failures": {
                 c.name: int(f) for c, f in zip(self.config.criteria, failures, strict=True)
             },
-            "record": dict(zip(RECORD_COLUMNS, self._record_counts()[index].tolist(), strict=True)),
-            "backed_off": self.local_risk is not None and self.record.backs_off(index),
         }
 
     def _totals(self) -> list[int]:
@@ -1093,7 +1088,7 @@ class Shield:
             "local_risk": None
             if self.local_risk is None
             else self.local_risk.snapshot({name: s.slot for name, s in self.streams.items()}),
-            "record": None if self.local_risk is None else self.record.snapshot(),
+            "trial": None if self.local_risk is None else self.trial.snapshot(),
             "streams": {
                 name: {
                     "index": None if s.belief is None else s.belief.index.copy(),
@@ -1102,6 +1097,8 @@ class Shield:
                     "proposed_bin": s.proposed_bin,
                     "step": s.step,
                     "z": None if s.z is None else s.z.copy(),
+                    "arm": s.arm,
+                    "failed": s.failed,
                 }
                 for name, s in self.streams.items()
             },
@@ -1222,7 +1219,6 @@ class Shield:
         if self.local_risk is not None:
             parts.append(("local_risk.tried", total(self.local_risk.tried), steps))
             parts.append(("local_risk.failures", total(self.local_risk.failures), steps))
-            parts.append(("record.counts", total(self.record.counts[:, [REVISED, PASSED]]), steps))
         for field_name, count, most in parts:
             if count > most:
                 raise InvalidSnapshot(
@@ -1280,6 +1276,9 @@ class Shield:
             None
             if belief is None or data.get("z") is None
             else stored.floats(data["z"], f"{field}.z", (self.space.size,)),
+            # (a snapshot from before the trial: no episode in it)
+            stored.integer(data.get("arm", NONE), f"{field}.arm", low=NONE, high=AUDITED),
+            stored.boolean(data.get("failed", False), f"{field}.failed"),
         )
 
     def _restore_risk(self, data: dict[str, Any], n: int) -> None:
@@ -1288,4 +1287,6 @@ class Shield:
         if self.local_risk is not None:
             slots = {name: s.slot for name, s in self.streams.items()}
             self.local_risk = LocalRisk.restore(self.local_risk, n, slots, data["local_risk"])
-            self.record = Record.restore(self._record_window(), n, self.streams, data.get("record"))
+            self.trial = Trial.restore(
+                self.config.reviser.seed, data.get("trial"), self.counters.episodes
+            )

@@ -17,7 +17,6 @@ from typing import Any
 import numpy as np
 
 from app.core import InvalidSnapshot, Shield
-from app.core.record import COLUMNS as RECORD_COLUMNS
 
 ARRAY = "__array__"
 # The dtypes a snapshot's arrays may have: what the core writes (float64, int64, int32).
@@ -199,8 +198,9 @@ def _read_member(archive: zipfile.ZipFile, name: str) -> np.ndarray:
 def readable(
     shield: Shield, tpm: str = "sparse", action: int | None = None, min_prob: float = 1e-3
 ) -> dict[str, Any]:
-    """What a person reads: states (with the shield's own record there, and whether it backs
-    off there) and the reach's failure points in physical units, and the
+    """What a person reads: states, the reach's failure points in physical units, the shield's
+    trial of itself
+    (episodes and failed episodes, shielded and audited), and the
     matrices (``sparse`` keeps the entries of at least ``min_prob``; ``dense`` all of them;
     ``none`` leaves them out)."""
     states = shield.states()
@@ -215,14 +215,13 @@ def readable(
                 "visits": int(states["visits"][i]),
                 "entries": int(states["entries"][i]),
                 "failures": dict(zip(criteria, states["failures"][i].tolist(), strict=True)),
-                "record": dict(zip(RECORD_COLUMNS, states["record"][i].tolist(), strict=True)),
-                "backed_off": bool(states["backed_off"][i]),
             }
             for i in range(shield.n_states)
         ],
         "failure_points": {
             name: points.tolist() for name, points in shield.failure_points().items()
         },
+        "trial": shield.trial.view(),
     }
     if tpm == "none":
         return out

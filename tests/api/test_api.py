@@ -83,11 +83,14 @@ def test_episodes_flags_and_counters_through_the_api(client: TestClient) -> None
     visited = [d["state"] for d in decisions]
     entered = 1 + sum(a != b for a, b in zip(visited, visited[1:], strict=False))
     assert sum(s["entries"] for s in snap["states"]) == entered
-    # the shield's own record: the episode's six decided steps, passed, one failure after them
-    records = [s["record"] for s in snap["states"]]
-    assert sum(r["passed"] for r in records) == 6 and sum(r["revised"] for r in records) == 0
-    assert sum(r["passed_failed"] for r in records) == 6
-    assert not any(s["backed_off"] for s in snap["states"])
+    # the trial of itself: the first episode came before any failure was learned, uncounted;
+    # the second is drawn into an arm and counted there when it ends
+    empty = {"episodes": 0, "failed": 0}
+    assert snap["trial"] == {"shielded": empty, "audited": empty}
+    episode(client, crash=False)
+    trial = client.get("/model", params={"tpm": "none"}).json()["trial"]
+    assert sum(arm["episodes"] for arm in trial.values()) == 1
+    assert sum(arm["failed"] for arm in trial.values()) == 0
 
 
 def test_models_lifecycle(client: TestClient) -> None:
@@ -146,7 +149,8 @@ def test_snapshot_put_restores_a_model_that_decides_alike(client: TestClient) ->
     )
     runs = [episode(client, f"/models/{m}/revise") for m in ("a", "b", "c")]
     assert runs[0] == runs[1] == runs[2]
-    assert any(d["reason"] == "revised_safety" for d in runs[0])
+    # the reviser decided: it revised, or it would have in an episode it audits
+    assert any(d["reason"] in ("revised_safety", "audit") for d in runs[0])
 
 
 def test_the_risk_reviser_through_the_api(client: TestClient) -> None:
@@ -163,9 +167,13 @@ def test_the_risk_reviser_through_the_api(client: TestClient) -> None:
     summary = client.get("/models/r").json()
     assert summary["exact"]["config"]["risk"]["horizon"] == 4
     assert client.put("/models/r2", json=summary).status_code == 200
-    runs = [episode(client, f"/models/{m}/revise") for m in ("r", "r2")]
-    assert runs[0] == runs[1]
-    revised = [d for d in runs[0] if d["revised"]]
+    revised: list[dict[str, Any]] = []
+    for _ in range(10):  # until an episode the shield acts in (it audits some: app.core.trial)
+        runs = [episode(client, f"/models/{m}/revise") for m in ("r", "r2")]
+        assert runs[0] == runs[1]
+        revised = [d for d in runs[0] if d["revised"]]
+        if revised:
+            break
     assert revised and revised[0]["reason"] == "revised_safety"
     assert revised[0]["risk"]["collision"] > 0.0
     assert all(set(c["risk"]) == {"collision", "large_distance"} for c in revised[0]["candidates"])

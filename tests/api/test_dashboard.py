@@ -204,6 +204,15 @@ def test_the_history_is_drawn_on_open_with_labelled_axes(server: Server, tmp_pat
         )
         assert drawn["tpm"]["xTicks"][0] == "0" and drawn["tpm"]["scale"][-1] == "1"
         assert drawn["tpm"]["points"] > 0
+        # the shield's trial of itself, as the model counts it
+        with ShieldClient(server.url, token=TOKEN, model="history") as shield:
+            trial = shield.snapshot(tpm="none", exact=False)["trial"]
+        assert sum(arm["episodes"] for arm in trial.values()) > 0
+        assert page.locator("#trial").inner_text() == (
+            f"trial of itself: {trial['shielded']['episodes']} episodes shielded "
+            f"({trial['shielded']['failed']} failed), {trial['audited']['episodes']} audited "
+            f"({trial['audited']['failed']} failed)"
+        )
 
         page.wait_for_timeout(300)
         shots = DOCS if os.environ.get("UPDATE_SCREENSHOTS") else tmp_path

@@ -1,0 +1,140 @@
+"""The shield's trial of itself (:mod:`app.core.trial`): episodes shielded against episodes
+audited, drawn by Thompson sampling from discounted counts, and kept in snapshots."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.core import InvalidSnapshot, Shield, ShieldConfig
+from app.core.trial import AUDITED, NONE, SHIELDED, Trial
+
+
+def harmful_shield() -> Shield:
+    """A shield whose every revision fails at once, and every proposal passes: a world where
+    its model is wrong. (A point that fails whenever the shield changes the action.)"""
+    shield = Shield(ShieldConfig.from_dict({"risk": {"reach_horizon": 0, "horizon": 4}}))
+    rng = np.random.default_rng(0)
+    for _ in range(80):
+        for t in range(30):
+            x = [float(rng.uniform(0, 1)), 5.0, 1.0]
+            decision = shield.step(x, float(rng.uniform(-2, 2)))
+            if (
+                decision.revised
+                or t == 10
+                and decision.action is not None
+                and decision.action > 1.5
+            ):
+                shield.step(x, None, done=True, event="collision")
+                break
+        else:
+            shield.step([0.5, 5.0, 1.0], None, done=True)
+    return shield
+
+
+def audit_share(trial: Trial, draws: int = 2000) -> float:
+    return float(np.mean([trial.draw(at) == AUDITED for at in range(draws)]))
+
+
+def test_a_draw_is_a_function_of_the_seed_and_the_step() -> None:
+    trial = Trial(seed=3)
+    trial.counts[:] = [[10, 3], [10, 4]]
+    assert [trial.draw(at) for at in range(50)] == [trial.draw(at) for at in range(50)]
+    other = Trial(seed=4)
+    other.counts[:] = trial.counts
+    assert [trial.draw(at) for at in range(50)] != [other.draw(at) for at in range(50)]
+
+
+def test_it_audits_by_how_likely_the_shield_is_the_worse_arm() -> None:
+    trial = Trial(seed=0)
+    assert 0.4 < audit_share(trial) < 0.6  # no evidence: either arm
+    trial.counts[:] = [[40, 2], [10, 5]]  # shielded episodes fail far less often
+    assert audit_share(trial) < 0.01
+    trial.counts[:] = [[10, 8], [40, 12]]  # shielded episodes fail far more often
+    assert audit_share(trial) > 0.99
+    trial.counts[:] = [[30, 9], [30, 9]]  # the same: a coin
+    assert 0.4 < audit_share(trial) < 0.6
+
+
+def test_an_episode_counts_in_its_arm_and_one_outside_the_trial_nowhere() -> None:
+    trial = Trial(seed=0)
+    trial.count(SHIELDED, failed=True)
+    trial.count(AUDITED, failed=False)
+    trial.count(AUDITED, failed=True)
+    trial.count(NONE, failed=True)
+    assert trial.view() == {
+        "shielded": {"episodes": 1, "failed": 1},
+        "audited": {"episodes": 2, "failed": 1},
+    }
+
+
+def test_a_shield_whose_revisions_fail_audits_most_episodes_and_says_so() -> None:
+    shield = harmful_shield()
+    (shielded, _), (audited, audited_failed) = shield.trial.counts.tolist()
+    assert audited > 2 * shielded
+    # an audited episode passes every proposal and says what it would have done
+    shield.step([0.5, 5.0, 1.0], 2.0, stream="audit-me")
+    state = shield.streams["audit-me"]
+    state.arm = AUDITED
+    decisions = [
+        shield.step([float(x), 5.0, 1.0], 2.0, stream="audit-me", learn=False)
+        for x in np.linspace(0, 1, 21)
+    ]
+    audits = [d for d in decisions if d.reason == "audit"]
+    assert audits and all(d.action == 2.0 and not d.revised and d.suggested != 2.0 for d in audits)
+
+
+def test_the_trial_and_each_streams_arm_survive_a_snapshot() -> None:
+    shield = harmful_shield()
+    for t in range(5):
+        shield.step([0.1 * t, 5.0, 1.0], 1.0, stream="open")
+    restored = Shield.from_snapshot(shield.snapshot())
+    assert np.array_equal(restored.trial.counts, shield.trial.counts)
+    assert restored.streams["open"].arm == shield.streams["open"].arm
+    rng = np.random.default_rng(1)
+    for _ in range(200):  # and both decide the same from here on
+        x, a = [float(rng.uniform(0, 1)), 5.0, 1.0], float(rng.uniform(-2, 2))
+        assert shield.step(x, a, stream="open") == restored.step(x, a, stream="open")
+
+
+def test_a_snapshot_from_before_the_trial_restores_with_nothing_counted() -> None:
+    # (and with the per-state record of the cores before it, which this one does not keep)
+    shield = harmful_shield()
+    snapshot = shield.snapshot()
+    del snapshot["trial"]
+    snapshot["record"] = {"counts": [[1, 0, 2, 0, 0]]}  # an earlier core's record: not read
+    for stream in snapshot["streams"].values():
+        del stream["arm"], stream["failed"]
+    restored = Shield.from_snapshot(snapshot)
+    assert not restored.trial.counts.any()
+    assert all(s.arm == NONE for s in restored.streams.values())
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        (lambda s: s["trial"].__setitem__((0, 1), 10**9), "trial"),
+        (lambda s: s["trial"].__setitem__((1, 1), s["trial"][1, 0] + 1), "trial"),
+        (lambda s: s.__setitem__("trial", s["trial"].astype(float) + 0.5), "trial"),
+        (lambda s: s.__setitem__("trial", s["trial"][:1]), "trial"),
+        (lambda s: s["streams"]["open"].__setitem__("arm", 2), "streams.open.arm"),
+        (lambda s: s["streams"]["open"].__setitem__("failed", 1), "streams.open.failed"),
+    ],
+)
+def test_a_damaged_trial_is_refused_naming_its_field(change: object, field: str) -> None:
+    shield = harmful_shield()
+    shield.step([0.5, 5.0, 1.0], 1.0, stream="open")
+    snapshot = shield.snapshot()
+    change(snapshot)  # type: ignore[operator]
+    with pytest.raises(InvalidSnapshot) as error:
+        Shield.from_snapshot(snapshot)
+    assert error.value.field == field
+
+
+def test_the_paper_reviser_keeps_no_trial() -> None:
+    shield = Shield(ShieldConfig.paper())
+    for t in range(40):
+        shield.step([float(t % 7), 5.0, 1.0], 0.5)
+        if t % 10 == 9:
+            shield.step([1.0, 5.0, 1.0], None, done=True, event="collision")
+    assert shield.snapshot()["trial"] is None and not shield.trial.counts.any()
