@@ -127,7 +127,9 @@ class Decision(BaseModel):
         "would have changed) the action."
     )
     reason: str = Field(
-        description="pass, revised_safety, revised_speed, audit (an episode "
+        description="pass, revised_safety, revised_speed, backed_off (the "
+        "risk reviser passed the proposal where its revisions were followed "
+        "by more failures; suggested holds the revision), audit (an episode "
         "the shield leaves to the controller, to compare; suggested holds the "
         "revision), inactive, cold_start or done."
     )

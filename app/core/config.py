@@ -368,7 +368,8 @@ class RiskConfig:
     The reach (:mod:`app.core.reach`) asks whether a failure can still be avoided:
     ``reach_horizon`` steps of the learned dynamics under the safest action after the one
     judged, a path counting as failing by its closeness to a failure seen, within
-    ``reach_radius`` in the clustering space.
+    ``reach_radius`` in the clustering space. The shield's own record (:mod:`app.core.record`)
+    counts failures within the farther of the two horizons.
     """
 
     horizon: int = 24

@@ -36,6 +36,8 @@ from app.core.lazy_tpm import LazyTransitions
 from app.core.local_risk import LocalRisk
 from app.core.observation import ObservationSpace
 from app.core.observation import check as check_observation
+from app.core.record import COLUMNS as RECORD_COLUMNS
+from app.core.record import PASSED, REVISED, Record
 from app.core.step import learn_and_decide, observe
 from app.core.tpm import DenseTransitions, TransitionModel
 from app.core.trial import AUDITED, LONGEST, NONE, Trial
@@ -275,6 +277,7 @@ class Shield:
             cfg.reviser.flags, cfg.limits.max_states, len(cfg.criteria), cfg.reviser.flag_min_rate
         )
         self.local_risk = self._new_local_risk()
+        self.record = Record(self._record_window())
         self.trial = Trial(cfg.reviser.seed)
         self.streams: dict[str, StreamState] = {}  # least recently stepped first
         self._free_slots: list[int] = []  # slots of streams that ended, reused first
@@ -303,6 +306,11 @@ class Shield:
             cfg.risk.reach_radius,
             self._bounds(),
         )
+
+    def _record_window(self) -> int:
+        """The steps within which a failure counts against a decision in the shield's own
+        record (:mod:`app.core.record`): the farther of the risk's horizon and the reach's."""
+        return max(self.config.risk.horizon, self.config.risk.reach_horizon)
 
     def _bounds(self) -> FloatArray:
         """The criteria's bounds in the clustering space (:func:`app.core.reach.no_bounds`'s
@@ -483,6 +491,8 @@ class Shield:
         state = self._stream(step.stream)
         if self._by_risk:
             self._enter_trial(state, step)
+            if step.event is not None or step.done:
+                self.record.settle(step.stream, step.event is not None)
         decide = self._by_risk and not step.done
         by_bin, verdicts = _NO_RISKS, _NO_VERDICTS
         if decide:
@@ -535,6 +545,8 @@ class Shield:
         else:
             state.applied_bin = actions.encode(decision.action, cfg.action)
         state.step += 1
+        if self._by_risk:
+            self.record.note(step.stream, recognised, decision.action != step.action)
         if decision.revised and not decision.shadow:
             self.counters.interventions[decision.verdict] += 1
         return decision
@@ -662,6 +674,7 @@ class Shield:
         slot = self.streams.pop(name).slot
         if self.local_risk is not None:
             self.local_risk.forget(slot)
+        self.record.forget(name)
         self._free_slots.append(slot)
 
     def _add_state(self) -> None:
@@ -670,6 +683,7 @@ class Shield:
         self.flags.add_state()
         if self.local_risk is not None:
             self.local_risk.add_state()
+            self.record.add_state()
 
     def _arrays(self) -> tuple[Any, ...]:
         """The settings and arrays :func:`~app.core.step.learn_and_decide` takes before the
@@ -942,6 +956,9 @@ class Shield:
             elif (stream := self.streams.get(step.stream)) is not None and stream.arm == AUDITED:
                 # an episode the shield leaves to the controller, to compare (app.core.trial)
                 suggested, reason = self._bin_actions[final], "audit"
+            elif self.record.backs_off(recognised):
+                # its revisions here were followed by more failures than the proposals
+                suggested, reason = self._bin_actions[final], "backed_off"
             else:
                 way = 1 if final > start else -1
                 candidates = RiskCandidates(
@@ -994,7 +1011,23 @@ class Shield:
             "entries": self.flags.entries.copy(),
             "failures": self.flags.failures.copy(),
             "support": self.clusterer.support,
+            "record": self._record_counts(),
+            "backed_off": self._backed_off(),
         }
+
+    def _record_counts(self) -> npt.NDArray[np.int64]:
+        """The shield's own record per state (:data:`app.core.record.COLUMNS`): zeros for the
+        paper's reviser, which keeps none."""
+        if self.local_risk is None:
+            return np.zeros((self.n_states, len(RECORD_COLUMNS)), dtype=np.int64)
+        return self.record.counts.copy()
+
+    def _backed_off(self) -> npt.NDArray[np.bool_]:
+        """Per state, whether the risk reviser passes proposals there because its revisions
+        were followed by more failures than the proposals (:mod:`app.core.record`)."""
+        if self.local_risk is None:
+            return np.zeros(self.n_states, dtype=bool)
+        return self.record.backed_off()
 
     def failure_points(self) -> dict[str, FloatArray]:
         """Per criterion, the observations (physical units) where the reach keeps its
@@ -1008,8 +1041,8 @@ class Shield:
         }
 
     def state_view(self, index: int) -> dict[str, Any]:
-        """One state: centre in physical units, spread, flag, visits, entries and failures by
-        criterion."""
+        """One state: centre in physical units, spread, flag, visits, entries, failures by
+        criterion, and the shield's own record there (:mod:`app.core.record`)."""
         names = [None] + [c.name for c in self.config.criteria]
         failures = self.flags.failures[index]
         return {
@@ -1022,6 +1055,8 @@ class Shield:
             "failures": {
                 c.name: int(f) for c, f in zip(self.config.criteria, failures, strict=True)
             },
+            "record": dict(zip(RECORD_COLUMNS, self._record_counts()[index].tolist(), strict=True)),
+            "backed_off": self.local_risk is not None and self.record.backs_off(index),
         }
 
     def _totals(self) -> list[int]:
@@ -1088,6 +1123,7 @@ class Shield:
             "local_risk": None
             if self.local_risk is None
             else self.local_risk.snapshot({name: s.slot for name, s in self.streams.items()}),
+            "record": None if self.local_risk is None else self.record.snapshot(),
             "trial": None if self.local_risk is None else self.trial.snapshot(),
             "streams": {
                 name: {
@@ -1219,6 +1255,7 @@ class Shield:
         if self.local_risk is not None:
             parts.append(("local_risk.tried", total(self.local_risk.tried), steps))
             parts.append(("local_risk.failures", total(self.local_risk.failures), steps))
+            parts.append(("record.counts", total(self.record.counts[:, [REVISED, PASSED]]), steps))
         for field_name, count, most in parts:
             if count > most:
                 raise InvalidSnapshot(
@@ -1287,6 +1324,7 @@ class Shield:
         if self.local_risk is not None:
             slots = {name: s.slot for name, s in self.streams.items()}
             self.local_risk = LocalRisk.restore(self.local_risk, n, slots, data["local_risk"])
+            self.record = Record.restore(self._record_window(), n, self.streams, data.get("record"))
             self.trial = Trial.restore(
                 self.config.reviser.seed, data.get("trial"), self.counters.episodes
             )

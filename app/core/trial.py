@@ -1,13 +1,11 @@
 """The shield's trial of itself: episodes it shields against episodes it leaves to the
 controller, so that turning it on cannot make the controller fail more often for long.
 
-A revision claims that the action applied is safer than the proposal, and the model behind it
-can be wrong where its assumptions fail (a safe direction that holds in one part of the state
-space and not in another, a failure that comes later than the horizon); then the shield makes
-the controller worse. Comparing its revised steps with the ones it passed cannot tell: it
-revises the riskier steps, a step's outcome depends on every step after it, and where it
-revises nearly every step there is nothing to compare with. What a user asks is simpler: does
-an episode fail more often with the shield than without it? The trial asks that directly.
+The shield's record (:mod:`app.core.record`) compares, per state, its revised steps with the
+proposals it passed. That cannot see harm everywhere: it revises the riskier steps, a step's
+outcome depends on every step after it, and where it revises nearly every step there is
+nothing to compare with. What a user asks is simpler: does an episode fail more often with the
+shield than without it? The trial asks that directly.
 
 At the start of each episode (once a failure was learned and an episode has ended) the shield
 draws whether to act in it or to **audit** it, passing every proposal (``reason: "audit"``,

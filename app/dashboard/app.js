@@ -272,8 +272,13 @@ async function pickState(event) {
   const detail = await (await api(`/models/${view.model}/states/${best}?top=3`)).json();
   const failures = Object.entries(detail.failures).filter(([, n]) => n > 0)
     .map(([name, n]) => `${n} ${name.replace("_", " ")}`).join(", ") || "no failures";
+  const record = detail.record;
+  const watched = record.revised + record.passed === 0 ? "" : `; the shield's revisions here: `
+    + `${record.revised} steps, ${record.revised_failed} followed by a failure, against `
+    + `${record.passed_failed} of ${record.passed} passed`
+    + (detail.backed_off ? " (backed off: it passes the proposals here)" : "");
   $("picked").textContent =
-    `#${best} (${detail.flag || "favourable"}, ${detail.visits} visits, ${failures})`;
+    `#${best} (${detail.flag || "favourable"}, ${detail.visits} visits, ${failures}${watched})`;
   const rows = detail.next.map((a) => `<tr><td>${a.bin}</td><td>${a.states.map(
     (s) => `#${s.state} ${(100 * s.prob).toFixed(1)}%`).join(", ")}</td></tr>`).join("");
   $("state-detail").innerHTML = `<p>centre ${detail.centre.map((v) => v.toFixed(1)).join(", ")}</p>`

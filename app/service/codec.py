@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from app.core import InvalidSnapshot, Shield
+from app.core.record import COLUMNS as RECORD_COLUMNS
 
 ARRAY = "__array__"
 # The dtypes a snapshot's arrays may have: what the core writes (float64, int64, int32).
@@ -198,8 +199,8 @@ def _read_member(archive: zipfile.ZipFile, name: str) -> np.ndarray:
 def readable(
     shield: Shield, tpm: str = "sparse", action: int | None = None, min_prob: float = 1e-3
 ) -> dict[str, Any]:
-    """What a person reads: states, the reach's failure points in physical units, the shield's
-    trial of itself
+    """What a person reads: states (with the shield's own record there, and whether it backs
+    off there), the reach's failure points in physical units, the shield's trial of itself
     (episodes and failed episodes, shielded and audited), and the
     matrices (``sparse`` keeps the entries of at least ``min_prob``; ``dense`` all of them;
     ``none`` leaves them out)."""
@@ -215,6 +216,8 @@ def readable(
                 "visits": int(states["visits"][i]),
                 "entries": int(states["entries"][i]),
                 "failures": dict(zip(criteria, states["failures"][i].tolist(), strict=True)),
+                "record": dict(zip(RECORD_COLUMNS, states["record"][i].tolist(), strict=True)),
+                "backed_off": bool(states["backed_off"][i]),
             }
             for i in range(shield.n_states)
         ],

@@ -83,6 +83,11 @@ def test_episodes_flags_and_counters_through_the_api(client: TestClient) -> None
     visited = [d["state"] for d in decisions]
     entered = 1 + sum(a != b for a, b in zip(visited, visited[1:], strict=False))
     assert sum(s["entries"] for s in snap["states"]) == entered
+    # the shield's own record: the episode's six decided steps, passed, one failure after them
+    records = [s["record"] for s in snap["states"]]
+    assert sum(r["passed"] for r in records) == 6 and sum(r["revised"] for r in records) == 0
+    assert sum(r["passed_failed"] for r in records) == 6
+    assert not any(s["backed_off"] for s in snap["states"])
     # the trial of itself: the first episode came before any failure was learned, uncounted;
     # the second is drawn into an arm and counted there when it ends
     empty = {"episodes": 0, "failed": 0}

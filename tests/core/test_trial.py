@@ -98,11 +98,9 @@ def test_the_trial_and_each_streams_arm_survive_a_snapshot() -> None:
 
 
 def test_a_snapshot_from_before_the_trial_restores_with_nothing_counted() -> None:
-    # (and with the per-state record of the cores before it, which this one does not keep)
     shield = harmful_shield()
     snapshot = shield.snapshot()
     del snapshot["trial"]
-    snapshot["record"] = {"counts": [[1, 0, 2, 0, 0]]}  # an earlier core's record: not read
     for stream in snapshot["streams"].values():
         del stream["arm"], stream["failed"]
     restored = Shield.from_snapshot(snapshot)

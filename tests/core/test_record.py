@@ -1,0 +1,144 @@
+"""The shield's own record (:mod:`app.core.record`): outcomes settled per state, backing off
+where revisions fail more often than the proposals passed, and its snapshot."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.core import InvalidSnapshot, Shield, ShieldConfig
+from app.core.record import (
+    COLUMNS,
+    PASSED,
+    PASSED_FAILED,
+    REVISED,
+    REVISED_FAILED,
+    REVISED_FAILURES,
+    Record,
+    excess,
+)
+from tests.utils import assert_same
+
+
+def record_of(states: int, window: int = 4) -> Record:
+    record = Record(window)
+    for _ in range(states):
+        record.add_state()
+    return record
+
+
+def test_a_failure_settles_every_pending_step_as_failed_and_an_old_step_as_not() -> None:
+    record = record_of(2)
+    for t in range(6):  # window 4: the first two steps age out unfailed
+        record.note("a", t % 2, revised=t >= 3)
+    assert record.counts[:, PASSED].tolist() == [1, 1]
+    assert record.counts[:, PASSED_FAILED].tolist() == [0, 0]
+    record.settle("a", failed=True)
+    row0, row1 = record.counts
+    assert (row0[PASSED], row0[PASSED_FAILED], row0[REVISED], row0[REVISED_FAILED]) == (2, 1, 1, 1)
+    assert (row1[PASSED], row1[REVISED], row1[REVISED_FAILED]) == (1, 2, 2)
+    assert row1[REVISED_FAILURES] == 1 and row0[REVISED_FAILURES] == 1  # one event each
+
+
+def test_an_episode_that_ends_well_settles_its_steps_unfailed_and_streams_apart() -> None:
+    record = record_of(1)
+    record.note("a", 0, revised=True)
+    record.note("b", 0, revised=True)
+    record.settle("a", failed=False)
+    assert record.counts[0, REVISED] == 1 and record.counts[0, REVISED_FAILED] == 0
+    record.forget("b")  # an expired stream: unsettled, uncounted
+    record.settle("b", failed=True)
+    assert record.counts[0, REVISED] == 1
+
+
+def test_it_backs_off_only_where_revisions_fail_clearly_more_often_than_passes() -> None:
+    record = record_of(1, window=1)
+    row = record.counts[0]
+    row[[REVISED, REVISED_FAILED, PASSED, PASSED_FAILED]] = (40, 20, 400, 20)
+    row[REVISED_FAILURES] = 1
+    assert not record.backs_off(0)  # one failure after revisions is no evidence
+    row[REVISED_FAILURES] = 20
+    assert record.backs_off(0)
+    row[[PASSED, PASSED_FAILED]] = (40, 20)  # the proposals fail as often: revising is no worse
+    assert not record.backs_off(0)
+    assert record.backed_off().tolist() == [False]
+
+
+def test_the_excess_counts_a_window_of_steps_as_one_sample() -> None:
+    # the same rates from ten times the steps within ten-step windows: the same evidence
+    assert excess(400, 200, 4000, 200, 10) == pytest.approx(
+        excess(40, 20, 400, 20, 1), rel=0.01
+    )  # (the prior aside)
+    assert excess(5, 5, 5, 0, 1) > 0 > excess(5, 0, 5, 5, 1)
+
+
+def backing_off_shield() -> Shield:
+    """A shield whose every revision fails at once, and every proposal passes: a world where
+    its model is wrong. (A point that fails whenever the shield changes the action.) A failure
+    does not end an episode: the stream goes on after it, and no episode ends for the shield's
+    trial of itself to compare (:mod:`app.core.trial`)."""
+    shield = Shield(ShieldConfig.from_dict({"risk": {"reach_horizon": 0, "horizon": 4}}))
+    rng = np.random.default_rng(0)
+    for _ in range(80):
+        for t in range(30):
+            x = [float(rng.uniform(0, 1)), 5.0, 1.0]
+            decision = shield.step(x, float(rng.uniform(-2, 2)))
+            if (
+                decision.revised
+                or t == 10
+                and decision.action is not None
+                and decision.action > 1.5
+            ):
+                shield.step(x, 0.0, event="collision")
+                break
+    return shield
+
+
+def test_a_shield_whose_revisions_fail_backs_off_says_so_and_keeps_its_record() -> None:
+    shield = backing_off_shield()
+    counts = shield.record.counts
+    assert counts[:, REVISED_FAILED].sum() > 0 and shield.record.backed_off().any()
+    backed = [shield.step([float(x), 5.0, 1.0], 2.0, learn=False) for x in np.linspace(0, 1, 21)]
+    held = [d for d in backed if d.reason == "backed_off"]
+    assert held and all(
+        d.action == 2.0 and not d.revised and d.suggested != 2.0 and d.verdict != "ok" for d in held
+    )
+    restored = Shield.from_snapshot(shield.snapshot())
+    assert_same(restored.snapshot()["record"], shield.snapshot()["record"])
+    assert np.array_equal(restored.record.backed_off(), shield.record.backed_off())
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        (lambda r: r["counts"].__setitem__((0, REVISED_FAILED), 10**6), "record.counts"),
+        (lambda r: r.__setitem__("counts", r["counts"][:, :2]), "record.counts"),
+        (lambda r: r.__setitem__("streams", ["nobody"]), "record.streams"),
+        (lambda r: r["states"].__setitem__(slice(None), 10**6), "record.states"),
+    ],
+)
+def test_a_damaged_record_is_refused_naming_its_field(change: object, field: str) -> None:
+    shield = Shield(ShieldConfig())
+    for t in range(30):
+        shield.step([float(t), 5.0, 1.0], 0.5)  # a pending step or more
+    shield.step([1.0, 5.0, 1.0], None, done=True, event="collision")
+    for t in range(3):
+        shield.step([float(t), 5.0, 1.0], 0.5)
+    snapshot = shield.snapshot()
+    assert len(COLUMNS) == snapshot["record"]["counts"].shape[1]
+    assert snapshot["record"]["streams"] == ["default"] or snapshot["record"]["streams"]
+    change(snapshot["record"])  # type: ignore[operator]
+    with pytest.raises(InvalidSnapshot) as error:
+        Shield.from_snapshot(snapshot)
+    assert error.value.field == field
+
+
+def test_a_snapshot_from_before_the_record_restores_with_nothing_counted() -> None:
+    shield = Shield(ShieldConfig())
+    for t in range(10):
+        shield.step([float(t), 5.0, 1.0], 0.5)
+    snapshot = shield.snapshot()
+    del snapshot["record"]
+    restored = Shield.from_snapshot(snapshot)
+    assert restored.record.counts.shape == (shield.n_states, len(COLUMNS))
+    assert not restored.record.counts.any()
