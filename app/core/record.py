@@ -23,9 +23,14 @@ run per state: once the shield passes the proposals there, the passed steps are 
 controller's own record in that state, and if passing fails more often than revising did,
 the shield revises there again.
 
-Where the shield's model is wrong everywhere, no single state gathers the evidence soon enough,
-and where it revises nearly every step there are no passes to compare with: the shield's trial
-of itself over whole episodes (:mod:`app.core.trial`) answers there.
+Within a state the shield revises the riskier steps, so its revisions would look worse than
+the passes even where they help; and where its model is wrong everywhere, no single state
+gathers the evidence soon enough. So the record also counts the steps over all states by the
+band of the proposal's predicted total risk (:data:`EDGES`), and compares revised and passed
+steps *of the same band*, pooled over the bands (:func:`pooled_excess`): where revisions are
+followed by failures more often than passed proposals the model judged as risky, by more than
+:data:`Z_EVERYWHERE` standard errors, the shield backs off in every state, until passing
+fails more often than revising did.
 """
 
 from __future__ import annotations
@@ -45,7 +50,9 @@ IntArray = npt.NDArray[np.int64]
 
 MIN_FAILURES = 2  # failures after revisions in a state before the shield may back off there
 Z = 1.0  # standard errors by which revisions must fail more often than the passed proposals
+Z_EVERYWHERE = 2.0  # the same, pooled over every state: backing off everywhere needs more
 
+EDGES = (0.01, 0.05, 0.2, 0.5)  # the bands of the proposal's predicted total risk
 REVISED, REVISED_FAILED, PASSED, PASSED_FAILED, REVISED_FAILURES = range(5)
 COLUMNS = ("revised", "revised_failed", "passed", "passed_failed", "revised_failures")
 
@@ -57,20 +64,25 @@ class Record:
     def __init__(self, window: int) -> None:
         self.window = window
         self.counts = np.zeros((0, len(COLUMNS)), dtype=np.int64)
-        self._pending: dict[str, deque[tuple[int, bool]]] = {}
+        # per band of the proposal's predicted risk, over all states: the first four columns
+        self.bands = np.zeros((len(EDGES) + 1, PASSED_FAILED + 1), dtype=np.int64)
+        self._pending: dict[str, deque[tuple[int, bool, int]]] = {}
+        self.everywhere = False  # whether the shield backs off in every state
 
     def add_state(self) -> None:
         """Room for one more state, with nothing counted."""
         self.counts = np.concatenate([self.counts, np.zeros((1, len(COLUMNS)), np.int64)])
 
-    def note(self, stream: str, state: int, revised: bool) -> None:
-        """A decided step of ``stream`` in ``state``; a pending step older than the window is
-        settled as not failed."""
+    def note(self, stream: str, state: int, revised: bool, risk: float) -> None:
+        """A decided step of ``stream`` in ``state`` whose proposal's predicted total risk was
+        ``risk``; a pending step older than the window is settled as not failed."""
         pending = self._pending.setdefault(stream, deque())
-        pending.append((state, revised))
+        pending.append((state, revised, band_of(risk)))
         if len(pending) > self.window:
-            old, was_revised = pending.popleft()
+            old, was_revised, band = pending.popleft()
             self.counts[old, REVISED if was_revised else PASSED] += 1
+            self.bands[band, REVISED if was_revised else PASSED] += 1
+            self.everywhere = self._backs_off_everywhere()
 
     def settle(self, stream: str, failed: bool) -> None:
         """The stream's episode ended, by a failure (``failed``) or not: every pending step
@@ -79,15 +91,18 @@ class Record:
         if not pending:
             return
         hit: set[int] = set()
-        for state, revised in pending:
-            row = self.counts[state]
+        for state, revised, band in pending:
+            row, by_band = self.counts[state], self.bands[band]
             row[REVISED if revised else PASSED] += 1
+            by_band[REVISED if revised else PASSED] += 1
             if failed:
                 row[REVISED_FAILED if revised else PASSED_FAILED] += 1
+                by_band[REVISED_FAILED if revised else PASSED_FAILED] += 1
                 if revised:
                     hit.add(state)
         for state in hit:
             self.counts[state, REVISED_FAILURES] += 1
+        self.everywhere = self._backs_off_everywhere()
 
     def forget(self, stream: str) -> None:
         """Drop a stream's pending steps (a stream the model forgets, unsettled)."""
@@ -96,6 +111,8 @@ class Record:
     def backs_off(self, state: int) -> bool:
         """Whether the revisions in ``state`` are followed by failures more often than the
         proposals passed there, by the test in the module's docstring."""
+        if self.everywhere:
+            return True
         row = self.counts[state]
         if row[REVISED_FAILURES] < MIN_FAILURES:
             return False
@@ -110,21 +127,33 @@ class Record:
             > Z
         )
 
+    def _backs_off_everywhere(self) -> bool:
+        """Whether, over all states, the revised steps are followed by failures more often
+        than the passed ones whose proposals the model judged as risky (the bands of
+        :data:`EDGES`), by more than :data:`Z_EVERYWHERE` standard errors
+        (:func:`pooled_excess`)."""
+        if self.counts[:, REVISED_FAILURES].sum() < MIN_FAILURES:
+            return False
+        return pooled_excess(self.bands, self.window) > Z_EVERYWHERE
+
     def backed_off(self) -> npt.NDArray[np.bool_]:
         """Per state, whether the shield backs off there now."""
         return np.array([self.backs_off(i) for i in range(self.counts.shape[0])], dtype=bool)
 
     def snapshot(self) -> dict[str, Any]:
-        """The counts per state, and each stream's pending steps (streams named in order,
-        their lengths, then states and whether revised, concatenated)."""
+        """The counts (per state, and per band of predicted risk), and each stream's pending
+        steps (streams named in order, their lengths, then states, whether revised and their
+        bands, concatenated)."""
         names = [name for name, pending in self._pending.items() if pending]
         steps = [step for name in names for step in self._pending[name]]
         return {
             "counts": self.counts.copy(),
             "streams": names,
             "lengths": np.array([len(self._pending[n]) for n in names], dtype=np.int64),
-            "states": np.array([s for s, _ in steps], dtype=np.int64),
-            "revised": np.array([r for _, r in steps], dtype=np.int64),
+            "states": np.array([s for s, _, _ in steps], dtype=np.int64),
+            "revised": np.array([r for _, r, _ in steps], dtype=np.int64),
+            "bands": self.bands.copy(),
+            "risk_bands": np.array([b for _, _, b in steps], dtype=np.int64),
         }
 
     @classmethod
@@ -165,19 +194,74 @@ class Record:
             data["states"], "record.states", (total,), low=0, high=max(n_states - 1, 0)
         )
         revised = stored.ints(data["revised"], "record.revised", (total,), low=0, high=1)
-        self.counts = counts.copy()
+        # (a snapshot from before the bands: none counted, its pending steps in the lowest)
+        bands = stored.ints(
+            data.get("bands", np.zeros_like(self.bands)),
+            "record.bands",
+            self.bands.shape,
+            low=0,
+            high=stored.MAX_COUNT,
+        )
+        if (
+            (bands[:, REVISED_FAILED] > bands[:, REVISED])
+            | (bands[:, PASSED_FAILED] > bands[:, PASSED])
+        ).any():
+            raise InvalidSnapshot("more failed steps than steps in a band", field="record.bands")
+        if bands.any() and not np.array_equal(
+            bands.sum(axis=0), counts[:, : PASSED_FAILED + 1].sum(axis=0)
+        ):
+            raise InvalidSnapshot(
+                "the bands count other steps than the states", field="record.bands"
+            )
+        risk_bands = stored.ints(
+            data.get("risk_bands", np.zeros(total, dtype=np.int64)),
+            "record.risk_bands",
+            (total,),
+            low=0,
+            high=len(EDGES),
+        )
+        self.counts, self.bands = counts.copy(), bands.copy()
         at = 0
         for name, length in zip(names, lengths.tolist(), strict=True):
             self._pending[name] = deque(
-                (int(s), bool(r))
-                for s, r in zip(
+                (int(s), bool(r), int(b))
+                for s, r, b in zip(
                     states[at : at + length].tolist(),
                     revised[at : at + length].tolist(),
+                    risk_bands[at : at + length].tolist(),
                     strict=True,
                 )
             )
             at += length
+        self.everywhere = self._backs_off_everywhere()
         return self
+
+
+def band_of(risk: float) -> int:
+    """The band of :data:`EDGES` a predicted total risk falls in."""
+    band = 0
+    while band < len(EDGES) and risk >= EDGES[band]:
+        band += 1
+    return band
+
+
+def pooled_excess(bands: IntArray, window: int) -> float:
+    """How many standard errors the failure rate after revisions exceeds the one after passed
+    proposals of the same band of predicted risk, pooled over the bands with both (a
+    Mantel-Haenszel risk difference, each band weighted by ``n_r n_p / (n_r + n_p)``; the rates
+    and samples as in :func:`excess`)."""
+    weight = difference = variance = 0.0
+    for revised, revised_failed, passed, passed_failed in bands.tolist():
+        if revised == 0 or passed == 0:
+            continue
+        rate_r = (revised_failed + 1) / (revised + 2)
+        rate_p = (passed_failed + 1) / (passed + 2)
+        samples_r, samples_p = max(revised / window, 1.0), max(passed / window, 1.0)
+        w = samples_r * samples_p / (samples_r + samples_p)
+        weight += w
+        difference += w * (rate_r - rate_p)
+        variance += w * w * (rate_r * (1 - rate_r) / samples_r + rate_p * (1 - rate_p) / samples_p)
+    return 0.0 if weight == 0.0 else difference / math.sqrt(variance)
 
 
 def excess(

@@ -545,8 +545,11 @@ class Shield:
         else:
             state.applied_bin = actions.encode(decision.action, cfg.action)
         state.step += 1
-        if self._by_risk:
-            self.record.note(step.stream, recognised, decision.action != step.action)
+        if self._by_risk and state.arm != AUDITED:  # (an audited episode is the trial's)
+            spared = 1.0
+            for value in decision.risk.values():
+                spared *= 1.0 - value
+            self.record.note(step.stream, recognised, decision.action != step.action, 1.0 - spared)
         if decision.revised and not decision.shadow:
             self.counters.interventions[decision.verdict] += 1
         return decision

@@ -1,21 +1,21 @@
 """The shield's trial of itself: episodes it shields against episodes it leaves to the
 controller, so that turning it on cannot make the controller fail more often for long.
 
-The shield's record (:mod:`app.core.record`) compares, per state, its revised steps with the
-proposals it passed. That cannot see harm everywhere: it revises the riskier steps, a step's
-outcome depends on every step after it, and where it revises nearly every step there is
-nothing to compare with. What a user asks is simpler: does an episode fail more often with the
-shield than without it? The trial asks that directly.
+The shield's record (:mod:`app.core.record`) compares its revised steps with the proposals it
+passed. That cannot see every harm: it revises the riskier steps, a step's outcome depends on
+every step after it, and where it revises nearly every step there is nothing to compare with.
+What a user asks is simpler: does an episode fail more often with the shield than without it?
+The trial asks that directly.
 
 At the start of each episode (once a failure was learned and an episode has ended) the shield
-draws whether to act in it or to **audit** it, passing every proposal (``reason: "audit"``,
-the revision it would have made in ``suggested``). Per arm it counts the episodes and those in
-which any failure happened, and draws by Thompson sampling: one draw from each arm's posterior
-failure rate (a Beta distribution from a uniform prior), auditing when the audited arm's draw
-is the lower. Where the shield helps, audits become rare as the
-evidence grows (about the logarithm of the episodes, the fewer the farther apart the arms
-are); where it harms, it audits nearly every episode, and an audited episode is the
-controller's own.
+draws whether to act in it or to **audit** it, passing every proposal (``reason: "audit"``, the
+revision it would have made in ``suggested``). Per arm it counts the episodes and those in which
+any failure happened, and draws by Thompson sampling: one draw from each arm's posterior failure
+rate (a Beta distribution from a uniform prior), auditing when the audited arm's draw is the
+lower. The steps of an audited episode are the trial's, kept out of the record. Where the shield
+helps, audits become rare as the evidence grows (about the logarithm of the episodes, the fewer
+the farther apart the arms are); where it harms, it audits nearly every episode, and an audited
+episode is the controller's own.
 
 Every draw is a function of the configuration's seed and the model's step count, so a model
 decides the same for the same input, also after a snapshot. An audit that lasts more than

@@ -14,8 +14,12 @@ from app.core.record import (
     REVISED,
     REVISED_FAILED,
     REVISED_FAILURES,
+    Z_EVERYWHERE,
     Record,
+    Z,
+    band_of,
     excess,
+    pooled_excess,
 )
 from tests.utils import assert_same
 
@@ -30,7 +34,7 @@ def record_of(states: int, window: int = 4) -> Record:
 def test_a_failure_settles_every_pending_step_as_failed_and_an_old_step_as_not() -> None:
     record = record_of(2)
     for t in range(6):  # window 4: the first two steps age out unfailed
-        record.note("a", t % 2, revised=t >= 3)
+        record.note("a", t % 2, revised=t >= 3, risk=0.0)
     assert record.counts[:, PASSED].tolist() == [1, 1]
     assert record.counts[:, PASSED_FAILED].tolist() == [0, 0]
     record.settle("a", failed=True)
@@ -42,8 +46,8 @@ def test_a_failure_settles_every_pending_step_as_failed_and_an_old_step_as_not()
 
 def test_an_episode_that_ends_well_settles_its_steps_unfailed_and_streams_apart() -> None:
     record = record_of(1)
-    record.note("a", 0, revised=True)
-    record.note("b", 0, revised=True)
+    record.note("a", 0, revised=True, risk=0.0)
+    record.note("b", 0, revised=True, risk=0.0)
     record.settle("a", failed=False)
     assert record.counts[0, REVISED] == 1 and record.counts[0, REVISED_FAILED] == 0
     record.forget("b")  # an expired stream: unsettled, uncounted
@@ -76,7 +80,7 @@ def backing_off_shield() -> Shield:
     """A shield whose every revision fails at once, and every proposal passes: a world where
     its model is wrong. (A point that fails whenever the shield changes the action.) A failure
     does not end an episode: the stream goes on after it, and no episode ends for the shield's
-    trial of itself to compare (:mod:`app.core.trial`)."""
+    trial of itself to audit (:mod:`app.core.trial`)."""
     shield = Shield(ShieldConfig.from_dict({"risk": {"reach_horizon": 0, "horizon": 4}}))
     rng = np.random.default_rng(0)
     for _ in range(80):
@@ -98,6 +102,10 @@ def test_a_shield_whose_revisions_fail_backs_off_says_so_and_keeps_its_record() 
     shield = backing_off_shield()
     counts = shield.record.counts
     assert counts[:, REVISED_FAILED].sum() > 0 and shield.record.backed_off().any()
+    # the same settled steps, by state and by band of the proposal's predicted risk
+    bands = shield.record.bands
+    assert np.array_equal(bands.sum(axis=0), counts[:, : PASSED_FAILED + 1].sum(axis=0))
+    assert np.count_nonzero(bands.sum(axis=1)) > 1
     backed = [shield.step([float(x), 5.0, 1.0], 2.0, learn=False) for x in np.linspace(0, 1, 21)]
     held = [d for d in backed if d.reason == "backed_off"]
     assert held and all(
@@ -115,6 +123,9 @@ def test_a_shield_whose_revisions_fail_backs_off_says_so_and_keeps_its_record() 
         (lambda r: r.__setitem__("counts", r["counts"][:, :2]), "record.counts"),
         (lambda r: r.__setitem__("streams", ["nobody"]), "record.streams"),
         (lambda r: r["states"].__setitem__(slice(None), 10**6), "record.states"),
+        (lambda r: r["bands"].__setitem__((0, REVISED_FAILED), 10**6), "record.bands"),
+        (lambda r: r["risk_bands"].__setitem__(slice(None), 9), "record.risk_bands"),
+        (lambda r: r["bands"].__setitem__((0, PASSED), 10**6), "record.bands"),
     ],
 )
 def test_a_damaged_record_is_refused_naming_its_field(change: object, field: str) -> None:
@@ -142,3 +153,35 @@ def test_a_snapshot_from_before_the_record_restores_with_nothing_counted() -> No
     restored = Shield.from_snapshot(snapshot)
     assert restored.record.counts.shape == (shield.n_states, len(COLUMNS))
     assert not restored.record.counts.any()
+
+
+def test_revisions_are_compared_with_passes_of_the_same_predicted_risk_over_all_states() -> None:
+    # revisions at high predicted risk fail more often than passes at low risk, but less often
+    # than passes at the same risk: they help, and the shield does not back off
+    helpful = record_of(2, window=1)
+    helpful.bands[band_of(0.0)] = (0, 0, 400, 4)
+    helpful.bands[band_of(0.3)] = (200, 40, 100, 60)
+    helpful.counts[:, REVISED_FAILURES] = 20
+    assert excess(200, 40, 500, 64, 1) > Z  # state-blind, the revisions look worse
+    assert pooled_excess(helpful.bands, 1) < 0
+    # the same revisions followed by failures more often than passes of their band: harm
+    harmful = record_of(2, window=1)
+    harmful.bands[band_of(0.3)] = (200, 120, 100, 30)
+    assert pooled_excess(harmful.bands, 1) > Z_EVERYWHERE
+    assert [band_of(r) for r in (0.0, 0.01, 0.049, 0.2, 0.99)] == [0, 1, 1, 3, 4]
+
+
+def test_it_backs_off_everywhere_once_settled_steps_show_harm_and_comes_back() -> None:
+    record = record_of(3, window=2)
+    for episode in range(12):  # revised steps at predicted risk 0.3 fail, passed ones do not
+        record.note("a", episode % 3, revised=True, risk=0.3)
+        record.settle("a", failed=True)
+        record.note("a", episode % 3, revised=False, risk=0.3)
+        record.settle("a", failed=False)
+    assert record.everywhere and all(record.backs_off(i) for i in range(3))
+    restored = Record.restore(2, 3, {"a": 0}, record.snapshot())
+    assert restored.everywhere and np.array_equal(restored.bands, record.bands)
+    for _ in range(40):  # now the passed proposals fail: revising was better
+        record.note("a", 0, revised=False, risk=0.3)
+        record.settle("a", failed=True)
+    assert not record.everywhere

@@ -136,3 +136,19 @@ def test_the_paper_reviser_keeps_no_trial() -> None:
         if t % 10 == 9:
             shield.step([1.0, 5.0, 1.0], None, done=True, event="collision")
     assert shield.snapshot()["trial"] is None and not shield.trial.counts.any()
+
+
+def test_an_audited_episode_counts_in_the_trial_and_stays_out_of_the_record() -> None:
+    # the record compares the shield's own steps; an audited episode is the trial's control
+    shield = harmful_shield()
+    shield.trial.draw = lambda at: AUDITED  # type: ignore[method-assign]
+    counts, bands = shield.record.counts.copy(), shield.record.bands.copy()
+    trial = shield.trial.counts.copy()
+    reasons = {
+        shield.step([0.1 * t, 5.0, 1.0], 2.0, stream="audited").reason for t in range(10)
+    }
+    shield.step([0.5, 5.0, 1.0], None, stream="audited", done=True, event="collision")
+    assert "audit" in reasons and not reasons & {"revised_safety", "revised_speed"}
+    assert np.array_equal(shield.record.counts[: counts.shape[0]], counts)
+    assert np.array_equal(shield.record.bands, bands)
+    assert (shield.trial.counts - trial).tolist() == [[0, 0], [1, 1]]
