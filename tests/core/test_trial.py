@@ -144,9 +144,7 @@ def test_an_audited_episode_counts_in_the_trial_and_stays_out_of_the_record() ->
     shield.trial.draw = lambda at: AUDITED  # type: ignore[method-assign]
     counts, bands = shield.record.counts.copy(), shield.record.bands.copy()
     trial = shield.trial.counts.copy()
-    reasons = {
-        shield.step([0.1 * t, 5.0, 1.0], 2.0, stream="audited").reason for t in range(10)
-    }
+    reasons = {shield.step([0.1 * t, 5.0, 1.0], 2.0, stream="audited").reason for t in range(10)}
     shield.step([0.5, 5.0, 1.0], None, stream="audited", done=True, event="collision")
     assert "audit" in reasons and not reasons & {"revised_safety", "revised_speed"}
     assert np.array_equal(shield.record.counts[: counts.shape[0]], counts)
