@@ -21,8 +21,14 @@ NAMES = ("greenhouse", "bicycle", "pile")
 
 def world(name: str, bounded: bool = False) -> World:
     """The held-out world ``name``, with a bound per failure when ``bounded``."""
-    if name not in NAMES:
-        raise ValueError(f"no held-out world {name!r}; there are {', '.join(NAMES)}")
-    module = importlib.import_module(f"bench.heldout.{name}")
+    return select(__name__, NAMES, name, bounded)
+
+
+def select(package: str, names: tuple[str, ...], name: str, bounded: bool) -> World:
+    """The world ``name`` of a set of held-out worlds (``package``, whose modules ``names``
+    each give ``WORLD`` and ``WORLD_BOUNDED``), with a bound per failure when ``bounded``."""
+    if name not in names:
+        raise ValueError(f"no held-out world {name!r} in {package}; there are {', '.join(names)}")
+    module = importlib.import_module(f"{package}.{name}")
     found: World = module.WORLD_BOUNDED if bounded else module.WORLD
     return found

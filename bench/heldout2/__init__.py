@@ -14,8 +14,7 @@ README.md beside this module gives the rule that keeps these worlds held out.
 
 from __future__ import annotations
 
-import importlib
-
+from bench.heldout import select
 from bench.worlds.harness import World
 
 NAMES = ("field", "aircraft", "reactor")
@@ -24,10 +23,4 @@ NAMES = ("field", "aircraft", "reactor")
 def world(name: str, bounded: bool = False) -> World:
     """The held-out world ``name`` of the second set, with a bound per failure when
     ``bounded``."""
-    if name not in NAMES:
-        raise ValueError(
-            f"no held-out world {name!r} in the second set; there are {', '.join(NAMES)}"
-        )
-    module = importlib.import_module(f"bench.heldout2.{name}")
-    found: World = module.WORLD_BOUNDED if bounded else module.WORLD
-    return found
+    return select(__name__, NAMES, name, bounded)
