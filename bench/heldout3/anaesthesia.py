@@ -57,7 +57,7 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import Spaces, World
+from bench.worlds.harness import Spaces, plain_world
 from client.shield.spaces import config_for
 
 DT = 1.0  # [min] a step
@@ -271,17 +271,5 @@ BOUNDED: ShieldConfig = config_for(
 )
 
 
-def _world(name: str, config: ShieldConfig) -> World:
-    return World(
-        name=name,
-        make=lambda seed: Patient(),
-        controller=Anaesthetist,
-        config=config,
-        event=lambda obs, info: info["event"],
-        shield_observation=lambda obs: [float(v) for v in obs],
-        max_steps=MAX_STEPS,
-    )
-
-
-WORLD = _world("anaesthesia", CONFIG)
-WORLD_BOUNDED = _world("anaesthesia-bounded", BOUNDED)
+WORLD = plain_world("anaesthesia", Patient, Anaesthetist, CONFIG, MAX_STEPS)
+WORLD_BOUNDED = plain_world("anaesthesia-bounded", Patient, Anaesthetist, BOUNDED, MAX_STEPS)

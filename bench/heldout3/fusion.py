@@ -54,7 +54,7 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import Spaces, World
+from bench.worlds.harness import Spaces, plain_world
 from client.shield.spaces import config_for
 
 DT = 0.2  # [s]
@@ -228,17 +228,5 @@ BOUNDED: ShieldConfig = config_for(
 )
 
 
-def _world(name: str, config: ShieldConfig) -> World:
-    return World(
-        name=name,
-        make=lambda seed: Plasma(),
-        controller=BurnController,
-        config=config,
-        event=lambda obs, info: info["event"],
-        shield_observation=lambda obs: [float(v) for v in obs],
-        max_steps=MAX_STEPS,
-    )
-
-
-WORLD = _world("fusion", CONFIG)
-WORLD_BOUNDED = _world("fusion-bounded", BOUNDED)
+WORLD = plain_world("fusion", Plasma, BurnController, CONFIG, MAX_STEPS)
+WORLD_BOUNDED = plain_world("fusion-bounded", Plasma, BurnController, BOUNDED, MAX_STEPS)

@@ -53,7 +53,7 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from app.core import Bound, ShieldConfig
-from bench.worlds.harness import Spaces, World
+from bench.worlds.harness import Spaces, plain_world
 from client.shield.spaces import config_for
 
 DT = 0.2  # [s]
@@ -239,17 +239,5 @@ BOUNDED: ShieldConfig = config_for(
 )
 
 
-def _world(name: str, config: ShieldConfig) -> World:
-    return World(
-        name=name,
-        make=lambda seed: Trailer(),
-        controller=Assist,
-        config=config,
-        event=lambda obs, info: info["event"],
-        shield_observation=lambda obs: [float(v) for v in obs],
-        max_steps=MAX_STEPS,
-    )
-
-
-WORLD = _world("trailer", CONFIG)
-WORLD_BOUNDED = _world("trailer-bounded", BOUNDED)
+WORLD = plain_world("trailer", Trailer, Assist, CONFIG, MAX_STEPS)
+WORLD_BOUNDED = plain_world("trailer-bounded", Trailer, Assist, BOUNDED, MAX_STEPS)
