@@ -76,11 +76,11 @@ def test_the_excess_counts_a_window_of_steps_as_one_sample() -> None:
     assert excess(5, 5, 5, 0, 1) > 0 > excess(5, 0, 5, 5, 1)
 
 
-def backing_off_shield() -> Shield:
+def backing_off_shield(episodes: bool = False) -> Shield:
     """A shield whose every revision fails at once, and every proposal passes: a world where
-    its model is wrong. (A point that fails whenever the shield changes the action.) A failure
-    does not end an episode: the stream goes on after it, and no episode ends for the shield's
-    trial of itself to audit (:mod:`app.core.trial`)."""
+    its model is wrong. (A point that fails whenever the shield changes the action.) Without
+    ``episodes`` a failure does not end an episode: the stream goes on after it, and no episode
+    ends for the shield's trial of itself to audit (:mod:`app.core.trial`)."""
     shield = Shield(ShieldConfig.from_dict({"risk": {"reach_horizon": 0, "horizon": 4}}))
     rng = np.random.default_rng(0)
     for _ in range(80):
@@ -93,8 +93,14 @@ def backing_off_shield() -> Shield:
                 and decision.action is not None
                 and decision.action > 1.5
             ):
-                shield.step(x, 0.0, event="collision")
+                if episodes:
+                    shield.step(x, None, done=True, event="collision")
+                else:
+                    shield.step(x, 0.0, event="collision")
                 break
+        else:
+            if episodes:
+                shield.step([0.5, 5.0, 1.0], None, done=True)
     return shield
 
 

@@ -8,28 +8,13 @@ import pytest
 
 from app.core import InvalidSnapshot, Shield, ShieldConfig
 from app.core.trial import AUDITED, NONE, SHIELDED, Trial
+from tests.core.test_record import backing_off_shield
 
 
 def harmful_shield() -> Shield:
-    """A shield whose every revision fails at once, and every proposal passes: a world where
-    its model is wrong. (A point that fails whenever the shield changes the action.)"""
-    shield = Shield(ShieldConfig.from_dict({"risk": {"reach_horizon": 0, "horizon": 4}}))
-    rng = np.random.default_rng(0)
-    for _ in range(80):
-        for t in range(30):
-            x = [float(rng.uniform(0, 1)), 5.0, 1.0]
-            decision = shield.step(x, float(rng.uniform(-2, 2)))
-            if (
-                decision.revised
-                or t == 10
-                and decision.action is not None
-                and decision.action > 1.5
-            ):
-                shield.step(x, None, done=True, event="collision")
-                break
-        else:
-            shield.step([0.5, 5.0, 1.0], None, done=True)
-    return shield
+    """A shield whose every revision fails at once (:func:`backing_off_shield`), in episodes
+    that a failure ends."""
+    return backing_off_shield(episodes=True)
 
 
 def audit_share(trial: Trial, draws: int = 2000) -> float:
