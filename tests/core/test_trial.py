@@ -135,3 +135,32 @@ def test_an_audited_episode_counts_in_the_trial_and_stays_out_of_the_record() ->
     assert np.array_equal(shield.record.counts[: counts.shape[0]], counts)
     assert np.array_equal(shield.record.bands, bands)
     assert (shield.trial.counts - trial).tolist() == [[0, 0], [1, 1]]
+
+
+def test_no_episode_is_drawn_before_a_failure_was_learned_and_an_episode_has_ended() -> None:
+    shield = Shield(ShieldConfig())
+    for t in range(5):  # a failure learned mid-stream, no episode ended: nothing drawn
+        shield.step([float(t), 5.0, 1.0], 0.5, stream="s", event="collision" if t == 2 else None)
+    assert shield.streams["s"].arm == NONE
+    shield.step([1.0, 5.0, 1.0], 0.5, stream="other")  # a failure learned, no episode ended
+    assert shield.local_risk is not None and shield.local_risk.any_failure
+    assert shield.streams["other"].arm == NONE
+    shield.step([1.0, 5.0, 1.0], None, stream="s", done=True)
+    assert not shield.trial.counts.any()  # its episode was outside the trial
+    shield.step([1.0, 5.0, 1.0], 0.5, stream="s")  # the next episode's first step draws
+    assert shield.streams["s"].arm in (SHIELDED, AUDITED)
+
+
+def test_an_audit_ends_uncounted_past_twice_the_mean_episode_length() -> None:
+    shield = harmful_shield()
+    shield.trial.draw = lambda at: AUDITED  # type: ignore[method-assign]
+    longest = 2.0 * shield.counters.steps / shield.counters.episodes
+    trial = shield.trial.counts.copy()
+    shield.step([0.5, 5.0, 1.0], 1.0, stream="long")
+    audited = 0
+    while shield.streams["long"].arm == AUDITED and audited <= longest + 1:
+        shield.step([0.5, 5.0, 1.0], 1.0, stream="long")
+        audited += 1
+    assert shield.streams["long"].arm == NONE and audited >= int(longest) - 1
+    shield.step([0.5, 5.0, 1.0], None, stream="long", done=True, event="collision")
+    assert np.array_equal(shield.trial.counts, trial)  # the episode counted in neither arm
