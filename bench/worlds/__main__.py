@@ -28,13 +28,14 @@ WORLDS = ("braking_lead", "pendulum", "wall", "lane")
 
 def world_named(name: str) -> World:
     """A world of #44 by module name, one of #68's held-out worlds as ``heldout_NAME``,
-    ``heldout2_NAME`` (the second set) or ``heldout3_NAME`` (the third; with its bounds:
-    ``heldout_NAME_bounded``), or a tuning world by its name in
+    ``heldout2_NAME`` (the second set), ``heldout3_NAME`` (the third) or ``heldout4_NAME``
+    (the fourth; with its bounds: ``heldout_NAME_bounded``), or a tuning world by its name in
     :data:`bench.worlds.tuning.WORLDS` (``tuning_*``, and highway-env's ``highway*``)."""
     for prefix, package in (
         ("heldout_", "bench.heldout"),
         ("heldout2_", "bench.heldout2"),
         ("heldout3_", "bench.heldout3"),
+        ("heldout4_", "bench.heldout4"),
     ):
         if name.startswith(prefix):  # heldout_pile, heldout3_fusion_bounded, ...
             base = name.removeprefix(prefix)
