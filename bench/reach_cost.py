@@ -31,6 +31,8 @@ import app.core.shield as shield_module  # noqa: E402
 from app.core import local_risk, reach  # noqa: E402
 from bench.step_cost import SEED, build, steps, time_steps  # noqa: E402
 
+NO_COV = np.zeros((0, 0, 0))  # the dynamics' covariances, which the reach's risk does not read
+
 COLUMNS = (
     "the whole step",
     "clustering and recognition",
@@ -55,8 +57,6 @@ def measure(n: int, count: int) -> dict[str, float]:
     time_steps(shield, steps(200, SEED + 99, "keep"))
     module: Any = shield_module  # its two compiled calls are swapped for timed ones below
     first_call, compiled_call = module.observe, module.learn_and_decide
-    code = compiled_call.py_func.__code__
-    names = code.co_varnames[: code.co_argcount]
 
     def timed_first(*args: Any) -> Any:
         start = time.perf_counter()
@@ -68,40 +68,15 @@ def measure(n: int, count: int) -> dict[str, float]:
         start = time.perf_counter()
         result = compiled_call(*args)
         times["learning and the decision"].append(time.perf_counter() - start)
-        a = dict(zip(names, args, strict=True))
-        if a["decide"] and result[2]:
-            out = np.empty_like(a["by_bin"])
+        decide, (local, safe, _, _) = args[9][7], args[2]
+        if decide and result[2]:
+            index, prob, z, out = args[6], args[7], args[8], np.empty_like(args[10])
+            theta, tried, low, high, extent, midpoints = (local[i] for i in (1, 3, 4, 5, 6, 7))
             start = time.perf_counter()
-            reach.risk(
-                a["dynamics"],
-                a["peak"],
-                a["extent"],
-                a["index"],
-                a["prob"],
-                a["z"],
-                a["midpoints"],
-                a["safe"],
-                a["points"],
-                a["point_counts"],
-                a["bounds"],
-                a["reach_horizon"],
-                a["reach_radius"],
-                out,
-            )
+            reach.risk(local[13], extent, midpoints, index, prob, z, safe, out)
             times["the reach"].append(time.perf_counter() - start)
             start = time.perf_counter()
-            local_risk._read(
-                a["theta"],
-                a["tried"],
-                a["low"],
-                a["high"],
-                a["index"],
-                a["prob"],
-                a["z"],
-                a["midpoints"],
-                a["safe"],
-                out,
-            )
+            local_risk._read(theta, tried, low, high, index, prob, z, midpoints, safe, out)
             times["the read"].append(time.perf_counter() - start)
         return result
 

@@ -36,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.core import LimitsConfig, ReviserConfig, RiskConfig, Shield, ShieldConfig  # noqa: E402
 from app.core.belief import recognise  # noqa: E402
+from app.core.revisers import RiskReviser  # noqa: E402
 from bench.core_step import spread  # noqa: E402
 
 SEED = 0
@@ -55,6 +56,8 @@ def build(n: int, seed: int = SEED, reach_horizon: int = RiskConfig().reach_hori
     k = config.limits.belief_top_k
     z = rng.uniform(0, 1, 3)
     prev = recognise(shield.clusterer.sq_distances(z), variances, k)
+    reviser = shield.reviser
+    assert isinstance(reviser, RiskReviser)
     for t in range(40 * n):
         before, z = z, np.clip(z + rng.normal(0, 0.05, 3), 0, 1)
         belief = recognise(shield.clusterer.sq_distances(z), variances, k)
@@ -62,16 +65,14 @@ def build(n: int, seed: int = SEED, reach_horizon: int = RiskConfig().reach_hori
         if t % 2 == 0:
             shield.transitions.learn_one(prev, action, belief)
         failure = int(rng.integers(2)) if rng.random() < 0.005 else None
-        assert shield.local_risk is not None
-        shield.local_risk.learn(0, prev, before, action, failure, ended=False)
+        reviser.local_risk.learn(0, prev, before, action, failure, ended=False)
         # the reach's failures lie where failures lie in a world: at an edge of the space
         edge = 0 if z[1] < 0.03 else 1 if z[1] > 0.97 else None
-        shield.local_risk.learn_motion(
+        reviser.local_risk.learn_motion(
             prev, before, action, z, edge if rng.random() < 0.2 else None
         )
         prev = belief
-    assert shield.local_risk is not None
-    shield.local_risk.forget(0)  # the slot the shield's first stream takes
+    reviser.local_risk.forget(0)  # the slot the shield's first stream takes
     return shield
 
 

@@ -136,7 +136,7 @@ class EvolvingClusterer:
         size = min(self.n_states + 1, k)
         index = np.empty(size, dtype=np.int64)
         prob = np.empty(size)
-        kind, at, m = learn_and_recognise(z, *self.arrays(), k, index, prob)
+        kind, at, m = learn_and_recognise(z, self.arrays(), k, index, prob)
         return StateUpdate(_KINDS[kind], at), Belief(index[:m], prob[:m])
 
     def arrays(
@@ -278,45 +278,20 @@ def _sq_distances(
 @njit(cache=True)
 def learn_and_recognise(
     z: FloatArray,
-    centres: FloatArray,
-    stats: FloatArray,
-    support: npt.NDArray[np.int64],
-    sums: FloatArray,
-    counts: npt.NDArray[np.int64],
-    params: FloatArray,
-    modes: npt.NDArray[np.int64],
+    arrays: Any,
     top: int,
     index: npt.NDArray[np.int64],
     prob: FloatArray,
 ) -> tuple[int, int, int]:
-    """:meth:`EvolvingClusterer.learn_and_recognise` on its arrays (room for one more state):
-    :func:`_learn`, then :func:`~app.core.belief._recognise` on the states after it, into
-    ``index`` and ``prob``. Returns the update's kind, the state it touched and the belief's
-    size."""
+    """:meth:`EvolvingClusterer.learn_and_recognise` on its ``arrays``
+    (:meth:`EvolvingClusterer.arrays`, room for one more state): :func:`_learn`, then
+    :func:`~app.core.belief._recognise` on the states after it, into ``index`` and ``prob``.
+    Returns the update's kind, the state it touched and the belief's size."""
+    stats, sums, counts = arrays[1], arrays[3], arrays[4]
     counts[SAMPLES] += 1
     n, d = counts[STATES], z.shape[0]
     d2 = np.empty(n + 1)
-    kind, at, sigma, hit = _learn(
-        z,
-        counts[SAMPLES],
-        sums[:d],
-        float(sums[d]),
-        centres,
-        stats[SQ_NORM],
-        stats[POTENTIAL],
-        stats[RADIUS],
-        support,
-        stats[SCATTER],
-        stats[VARIANCE],
-        n,
-        modes[2],
-        params[0],
-        params[1],
-        modes[0] == 1,
-        modes[1],
-        params[2],
-        d2,
-    )
+    kind, at, sigma, hit = _learn(z, arrays, n, d2)
     sums[d] = sigma
     counts[CAPACITY_HITS] += hit
     if kind == NEW:
@@ -349,49 +324,21 @@ def _refresh_variance(
 
 
 @njit(cache=True, error_model="numpy")  # no divisor is 0; without the check the loops vectorise
-def _learn(
-    z: FloatArray,
-    k: int,
-    beta: FloatArray,
-    sigma: float,
-    centres: FloatArray,
-    sq_norms: FloatArray,
-    potentials: FloatArray,
-    radii: FloatArray,
-    support: npt.NDArray[np.int64],
-    scatter: FloatArray,
-    variances: FloatArray,
-    n: int,
-    max_states: int,
-    epsilon: float,
-    rho: float,
-    ets_plus: bool,
-    spread: int,
-    min_variance: float,
-    d2: FloatArray,
-) -> tuple[int, int, float, int]:
-    """One eTS / eTS+ step on the arrays (capacity for n + 1 states): the update's kind,
-    the state it touched, the new sigma and whether a candidate met the state limit. ``d2``
-    gets the squared distances to every centre after the update."""
+def _learn(z: FloatArray, arrays: Any, n: int, d2: FloatArray) -> tuple[int, int, float, int]:
+    """One eTS / eTS+ step on the clusterer's ``arrays`` (capacity for n + 1 states): the
+    update's kind, the state it touched, the new sigma and whether a candidate met the state
+    limit. ``d2`` gets the squared distances to every centre after the update."""
+    centres, stats, support, sums, counts, params, modes = arrays
+    d = z.shape[0]
+    k, beta, sigma = counts[SAMPLES], sums[:d], float(sums[d])
+    sq_norms, potentials, radii = stats[SQ_NORM], stats[POTENTIAL], stats[RADIUS]
+    scatter, variances = stats[SCATTER], stats[VARIANCE]
+    max_states, ets_plus, spread = modes[2], modes[0] == 1, modes[1]
+    epsilon, rho, min_variance = params[0], params[1], params[2]
     theta = _dot(z, z)
     index, kind, hit = 0, NEW, 0
     if n == 0:  # first sample: centre 1 with potential 1
-        _add(
-            z,
-            theta,
-            1.0,
-            centres,
-            sq_norms,
-            potentials,
-            radii,
-            support,
-            scatter,
-            variances,
-            0,
-            epsilon,
-            spread,
-            min_variance,
-        )
+        _add(z, theta, 1.0, 0, arrays)
         d2[0] = 0.0
     else:
         _sq_distances(centres, sq_norms, n, z, theta, d2)
@@ -420,22 +367,7 @@ def _learn(
             _sq_distances(centres, sq_norms, n, z, theta, d2)
             index, kind = nearest, REPLACED
         elif candidate and n < max_states:
-            _add(
-                z,
-                theta,
-                p_new,
-                centres,
-                sq_norms,
-                potentials,
-                radii,
-                support,
-                scatter,
-                variances,
-                n,
-                epsilon,
-                spread,
-                min_variance,
-            )
+            _add(z, theta, p_new, n, arrays)
             d2[n] = 0.0
             index = n
         else:
@@ -455,22 +387,13 @@ def _learn(
 
 
 @njit(cache=True)
-def _add(
-    z: FloatArray,
-    theta: float,
-    potential: float,
-    centres: FloatArray,
-    sq_norms: FloatArray,
-    potentials: FloatArray,
-    radii: FloatArray,
-    support: npt.NDArray[np.int64],
-    scatter: FloatArray,
-    variances: FloatArray,
-    n: int,
-    epsilon: float,
-    spread: int,
-    min_variance: float,
-) -> None:
+def _add(z: FloatArray, theta: float, potential: float, n: int, arrays: Any) -> None:
+    """State ``n`` at ``z`` (its squared norm ``theta``) with ``potential``, in the
+    clusterer's ``arrays``."""
+    centres, stats, support, _, _, params, modes = arrays
+    sq_norms, potentials, radii = stats[SQ_NORM], stats[POTENTIAL], stats[RADIUS]
+    scatter, variances = stats[SCATTER], stats[VARIANCE]
+    epsilon, spread, min_variance = params[0], modes[1], params[2]
     centres[:, n] = z
     sq_norms[n] = theta
     potentials[n] = potential

@@ -35,7 +35,7 @@ class StateFlags:
         self.table = np.zeros((3, 0), dtype=np.int64)
         self._failures = np.zeros((0, n_criteria), dtype=np.int64)
         self._flagged: tuple[IntArray, IntArray] | None = None
-        self._arrays: tuple[IntArray, IntArray] | None = None  # see arrays
+        self._arrays: tuple[IntArray, IntArray, bool, float] | None = None  # see arrays
 
     @property
     def flags(self) -> npt.NDArray[np.int64]:
@@ -53,11 +53,11 @@ class StateFlags:
         (read-only view)."""
         return read_only(self.table[ENTRIES, : self._n])
 
-    def arrays(self) -> tuple[IntArray, IntArray]:
-        """What a compiled step counts in (:func:`observe`'s arrays): the same tuple until a
-        state is added."""
+    def arrays(self) -> tuple[IntArray, IntArray, bool, float]:
+        """What a compiled step counts in (:func:`observe`'s arrays and settings, in order):
+        the same tuple until a state is added."""
         if self._arrays is None:
-            self._arrays = (self.table, self._failures)
+            self._arrays = (self.table, self._failures, self.mode == "rate", self.min_rate)
         return self._arrays
 
     @property

@@ -91,13 +91,14 @@ class LazyTransitions:
         """Current matrix size n."""
         return self._n
 
-    def arrays(
-        self,
-    ) -> tuple[FloatArray, FloatArray, IntArray, ColArray, FloatArray, IntArray, IntArray]:
-        """What a compiled step learns a transition with (:func:`learn`'s arrays, in order):
-        the same tuple until a state is added or the pool is compacted."""
+    def arrays(self) -> tuple[Any, ...]:
+        """What a compiled step learns a transition with (:func:`learn`'s ``tpm``): the
+        learning rate, then the log decay, the per-row numbers and counts, the pool's columns
+        and values, its use and a scratch map; the same tuple until a state is added or the
+        pool is compacted."""
         if self._arrays is None:
             self._arrays = (
+                self.config.learning_rate,
                 self._log_decay,
                 self._rows,
                 self._row_counts,
@@ -164,13 +165,7 @@ class LazyTransitions:
         """
         while True:
             needed = learn(
-                action_bin,
-                self.config.learning_rate,
-                prev.index,
-                prev.prob,
-                belief.index,
-                belief.prob,
-                *self.arrays(),
+                self.arrays(), action_bin, prev.index, prev.prob, belief.index, belief.prob
             )
             if not needed:
                 return
@@ -492,28 +487,22 @@ def _suffix_sums(x: FloatArray) -> FloatArray:
 
 @njit(cache=True)
 def learn(
+    tpm: Any,
     a: int,
-    lr: float,
     rows: IntArray,
     tau: FloatArray,
     cols: IntArray,
     gamma: FloatArray,
-    log_decay: FloatArray,
-    numbers: FloatArray,
-    counts: IntArray,
-    pool_cols: ColArray,
-    pool_vals: FloatArray,
-    used: IntArray,
-    slots: IntArray,
 ) -> int:
-    """:meth:`LazyTransitions.learn_one` on action ``a``'s rows (``numbers`` and ``counts``
-    are the per-row arrays, :meth:`LazyTransitions.arrays`). Returns 0, or, changing
-    nothing, the slots it needs at the pool's end when the rows that must move there (to
-    twice their room) do not fit.
+    """:meth:`LazyTransitions.learn_one` on action ``a``'s rows, ``tpm`` the matrices'
+    arrays (:meth:`LazyTransitions.arrays`; ``numbers`` and ``counts`` the per-row arrays).
+    Returns 0, or, changing nothing, the slots it needs at the pool's end when the rows that
+    must move there (to twice their room) do not fit.
 
     ``slots`` is a zeroed scratch map column -> slot + 1, filled for one row at a time and
     cleared again, so that finding the entries costs O(k W) whatever n is.
     """
+    lr, log_decay, numbers, counts, pool_cols, pool_vals, used, slots = tpm
     offset, row_sum, log_pad, log_level, learned_scale, pad_scale = (
         numbers[0],
         numbers[1],

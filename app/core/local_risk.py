@@ -175,18 +175,7 @@ class LocalRisk:
         closes its episode. One compiled call."""
         self.reserve(slot)
         learn_step(
-            self._theta,
-            self._cov,
-            self._tried,
-            self._low,
-            self._high,
-            self._extent,
-            self.midpoints,
-            self._queue_index,
-            self._queue_prob,
-            self._queue_phi,
-            self._queue_ends,
-            self.failures,
+            self.arrays(),
             slot,
             belief.index,
             belief.prob,
@@ -194,7 +183,6 @@ class LocalRisk:
             action_bin,
             -1 if failure is None else failure,
             ended,
-            self.horizon,
         )
 
     def learn_motion(
@@ -217,12 +205,15 @@ class LocalRisk:
             reach.add_failure(self._points, self._point_counts, failure, after, self.reach_radius)
 
     def arrays(self) -> tuple[Any, ...]:
-        """What a compiled step learns and decides with (:func:`learn_step`'s arrays, in
-        order, then the reach's: the dynamics, their covariances, the peak one-step error,
-        the failure points, their counts and the bounds): the same tuple until a state is
-        added or a new slot reserved."""
+        """What a compiled step learns and decides with, one tuple in :func:`learn_step`'s
+        order: the horizon, the weights and their covariances, the steps and boxes per state
+        and bin, the extent, the midpoints, the streams' queues, the failures learned, then the
+        reach's tuple (:func:`app.core.reach.risk`: its horizon and radius, the dynamics,
+        their covariances, the peak one-step error, the failure points, their counts and the
+        bounds). The same tuple until a state is added or a new slot reserved."""
         if self._arrays is None:
             self._arrays = (
+                self.horizon,
                 self._theta,
                 self._cov,
                 self._tried,
@@ -235,12 +226,16 @@ class LocalRisk:
                 self._queue_phi,
                 self._queue_ends,
                 self.failures,
-                self._dynamics,
-                self._dynamics_cov,
-                self._peak,
-                self._points,
-                self._point_counts,
-                self.bounds,
+                (
+                    self.reach_horizon,
+                    self.reach_radius,
+                    self._dynamics,
+                    self._dynamics_cov,
+                    self._peak,
+                    self._points,
+                    self._point_counts,
+                    self.bounds,
+                ),
             )
         return self._arrays
 
@@ -297,28 +292,16 @@ class LocalRisk:
         blend of the local model's (:meth:`read`) and the reach's, each under the monotone
         prior, and ``verdicts`` each bin's verdict; one compiled call."""
         return decide_step(
-            self._theta,
-            self._tried,
-            self._low,
-            self._high,
+            self.arrays(),
             belief.index,
             belief.prob,
             z,
-            self.midpoints,
             safe,
             proposed_bin,
             threshold,
             margin,
             by_bin,
             verdicts,
-            self._dynamics,
-            self._peak,
-            self._extent,
-            self._points,
-            self._point_counts,
-            self.bounds,
-            self.reach_horizon,
-            self.reach_radius,
         )
 
     def snapshot(self, slots: Mapping[str, int]) -> dict[str, Any]:
@@ -488,18 +471,7 @@ class LocalRisk:
 
 @njit(cache=True)
 def learn_step(
-    theta: FloatArray,
-    cov: FloatArray,
-    tried: IntArray,
-    low: FloatArray,
-    high: FloatArray,
-    extent: FloatArray,
-    midpoints: FloatArray,
-    queue_index: IntArray,
-    queue_prob: FloatArray,
-    queue_phi: FloatArray,
-    queue_ends: IntArray,
-    failures: IntArray,
+    model: Any,
     slot: int,
     index: IntArray,
     prob: FloatArray,
@@ -507,13 +479,28 @@ def learn_step(
     action_bin: int,
     failure: int,
     ended: bool,
-    horizon: int,
 ) -> None:
-    """:meth:`LocalRisk.learn` (``failure`` -1: none): count the step in the belief's most
-    likely state (the lowest index of equals) and widen that bin's box there to hold ``z``,
-    queue it with its ``phi(z, u) = [1, z, u]``, then fit the steps whose labels are known:
-    the oldest once it is ``horizon`` steps old, or every queued one at a failure or the
-    episode's end."""
+    """:meth:`LocalRisk.learn` on ``model`` (:meth:`LocalRisk.arrays`; ``failure`` -1: none):
+    count the step in the belief's most likely state (the lowest index of equals) and widen
+    that bin's box there to hold ``z``, queue it with its ``phi(z, u) = [1, z, u]``, then fit
+    the steps whose labels are known: the oldest once it is ``horizon`` steps old, or every
+    queued one at a failure or the episode's end."""
+    (
+        horizon,
+        theta,
+        cov,
+        tried,
+        low,
+        high,
+        extent,
+        midpoints,
+        queue_index,
+        queue_prob,
+        queue_phi,
+        queue_ends,
+        failures,
+        _,
+    ) = model
     home = index[np.argmax(prob)]
     tried[home, action_bin] += 1
     ring, d = queue_phi.shape[1], z.shape[0]
@@ -653,52 +640,35 @@ def _read_undirected(
 
 @njit(cache=True)
 def decide_step(
-    theta: FloatArray,
-    tried: IntArray,
-    low: FloatArray,
-    high: FloatArray,
+    model: Any,
     index: IntArray,
     prob: FloatArray,
     z: FloatArray,
-    midpoints: FloatArray,
     safe: IntArray,
     proposed_bin: int,
     threshold: float,
     margin: float,
     by_bin: FloatArray,
     verdicts: IntArray,
-    dynamics: FloatArray,
-    peak: FloatArray,
-    extent: FloatArray,
-    points: FloatArray,
-    point_counts: IntArray,
-    bounds: FloatArray,
-    reach_horizon: int,
-    reach_radius: float,
 ) -> tuple[float, int, int, bool]:
-    """:meth:`LocalRisk.decide` on its arrays: :func:`_read` and the reach
-    (:func:`app.core.reach.risk`), each under the monotone prior, and the decision on both
-    (:func:`app.core.risk.decide`)."""
+    """:meth:`LocalRisk.decide` on ``model`` (:meth:`LocalRisk.arrays`): :func:`_read` and the
+    reach (:func:`app.core.reach.risk`), each under the monotone prior, and the decision on
+    both (:func:`app.core.risk.decide`)."""
+    theta, tried, low, high, extent, midpoints = (
+        model[1],
+        model[3],
+        model[4],
+        model[5],
+        model[6],
+        model[7],
+    )
+    motion = model[13]
     _read(theta, tried, low, high, index, prob, z, midpoints, safe, by_bin)
     risk.monotone(by_bin, safe)
     reached = np.zeros(by_bin.shape)
+    reach_horizon = motion[0]
     if reach_horizon > 0:
-        reach.risk(
-            dynamics,
-            peak,
-            extent,
-            index,
-            prob,
-            z,
-            midpoints,
-            safe,
-            points,
-            point_counts,
-            bounds,
-            reach_horizon,
-            reach_radius,
-            reached,
-        )
+        reach.risk(motion, extent, midpoints, index, prob, z, safe, reached)
         risk.monotone(reached, safe)
     return risk.decide(
         by_bin, reached, reach_horizon > 0, proposed_bin, threshold, margin, verdicts

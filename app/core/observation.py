@@ -54,6 +54,11 @@ class ObservationSpace:
         self.scales = np.stack(
             [self._curved.astype(np.float64), self._knee, self._low, self._range]
         )
+        self._arrays = (self.raw, self.scales, self.features)
+
+    def arrays(self) -> tuple[bool, FloatArray, FloatArray]:
+        """What a compiled step normalises with (:func:`normalise`'s settings, in order)."""
+        return self._arrays
 
     def normalise(self, observation: FloatArray) -> FloatArray:
         """Physical units (a float64 vector) to the clustering space."""

@@ -48,6 +48,7 @@ model is affine, so every bin's path is ``p_t + q_t u_a`` from one rollout per c
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -162,19 +163,13 @@ def _closest(
 
 @njit(cache=True)
 def risk(
-    dynamics: FloatArray,
-    peak: FloatArray,
+    motion: Any,
     extent: FloatArray,
+    midpoints: FloatArray,
     index: IntArray,
     prob: FloatArray,
     z: FloatArray,
-    midpoints: FloatArray,
     safe: IntArray,
-    points: FloatArray,
-    counts: IntArray,
-    bounds: FloatArray,
-    horizon: int,
-    radius: float,
     out: FloatArray,
 ) -> None:
     """``out`` (bins x criteria): each action's reach risk at ``z`` under the belief
@@ -182,7 +177,13 @@ def risk(
     failure points and, for a criterion with a bound (``bounds``, :func:`no_bounds`), how
     early the box of its worst cases reaches the bound (:func:`crossings`); 0 for a criterion
     with neither. Each step of the path is checked against the failure points only where the
-    segment of all bins' points comes within the failures' box widened by the radius."""
+    segment of all bins' points comes within the failures' box widened by the radius.
+
+    ``motion`` is what the reach learned (the last item of
+    :meth:`app.core.local_risk.LocalRisk.arrays`): its horizon and radius,
+    the dynamics and their covariances, the peak one-step error, the failure points, their
+    counts and the bounds; ``extent`` the box of the observations seen."""
+    horizon, radius, dynamics, _, peak, points, counts, bounds = motion
     d, q = z.shape[0], midpoints.shape[0]
     model = np.zeros((d, d + 2))  # the belief's blend of its states' dynamics
     for t in range(index.shape[0]):

@@ -4,14 +4,20 @@
 Between the two calls the shield grows its per-state tables when a state was made (and resets
 a moved state's transitions, A16), which only Python does. :func:`learn_and_decide` then
 learns the stream's previous step (its transition, Eqs. 3-4 on the lazy TPM, and its risk
-label for the local model), counts the recognition and flags the state (A4) and, for the risk
-reviser, decides. Each kernel calls the kernels of the modules that own the arrays, so every
-equation has one implementation; this module only orders them, on the arrays the modules hand
-out (``arrays()``), so that a step passes a few dozen arrays to two calls instead of many
-small calls from Python.
+label for the local model), counts the recognition and flags the state (A4) and, for a reviser
+that decides in the compiled step, decides. Each kernel calls the kernels of the modules that
+own the arrays, so every equation has one implementation; this module only orders them.
+
+Each part hands the step one tuple of its arrays and settings (its ``arrays()``), laid out by
+the module that owns them and unpacked by that module's kernels, so that no order of
+arguments is kept by hand across modules. Plain tuples, not named ones: numba reads a plain
+tuple's types from a fingerprint, a named one's through Python, which costs more than the
+rest of the call.
 """
 
 from __future__ import annotations
+
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -23,182 +29,92 @@ from app.core.observation import normalise
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
-ColArray = npt.NDArray[np.int32]
+
+
+class Learned(NamedTuple):
+    """What :func:`learn_and_decide` did, with the decision's arrays it filled."""
+
+    needed: int  # TPM pool slots it lacked (then nothing changed: compact and call again)
+    flag_changed: bool  # whether the recognised state's flag changed
+    decided: bool  # whether the reviser decided (once a failure was learned)
+    threshold: float  # the decision's limit on the total risk (app.core.risk.decide)
+    worst: int  # the criterion the proposal risks most
+    final: int  # the bin the rule applies
+    kept: bool  # whether the rule keeps the proposal
+    by_bin: FloatArray  # each action's risk per criterion
+    verdicts: IntArray  # each bin's verdict (-1: ok)
 
 
 @njit(cache=True)
 def observe(
     x: FloatArray,
-    raw: bool,
-    scales: FloatArray,
-    features: FloatArray,
-    z: FloatArray,
-    centres: FloatArray,
-    stats: FloatArray,
-    support: IntArray,
-    sums: FloatArray,
-    counts: IntArray,
-    params: FloatArray,
-    modes: IntArray,
+    space: Any,
+    clusterer: Any,
     top: int,
     index: IntArray,
     prob: FloatArray,
+    z: FloatArray,
 ) -> tuple[int, int, int, int]:
-    """The observation ``x`` into the clustering space (``z``), clustered (the clusterer's
-    arrays, room for one more state) and recognised (``index`` and ``prob``, top ``top``).
-    Returns the update's kind, the state it touched, the belief's size and the recognised
-    state (the most likely, the lowest index of equals)."""
+    """The observation ``x`` into the clustering space (``z``, by the observation space's
+    settings, :meth:`~app.core.observation.ObservationSpace.arrays`), clustered (the
+    clusterer's arrays, :meth:`~app.core.clustering.EvolvingClusterer.arrays`, room for one
+    more state) and recognised (``index`` and ``prob``, top ``top``). Returns the update's
+    kind, the state it touched, the belief's size and the recognised state (the most likely,
+    the lowest index of equals)."""
+    raw, scales, features = space
     normalise(x, raw, scales, features, z)
-    kind, at, m = learn_and_recognise(
-        z, centres, stats, support, sums, counts, params, modes, top, index, prob
-    )
+    kind, at, m = learn_and_recognise(z, clusterer, top, index, prob)
     return kind, at, m, index[np.argmax(prob[:m])]
 
 
 @njit(cache=True)
 def learn_and_decide(
-    lr: float,
-    log_decay: FloatArray,
-    numbers: FloatArray,
-    row_counts: IntArray,
-    pool_cols: ColArray,
-    pool_vals: FloatArray,
-    used: IntArray,
-    slots: IntArray,
-    horizon: int,
-    theta: FloatArray,
-    cov: FloatArray,
-    tried: IntArray,
-    low: FloatArray,
-    high: FloatArray,
-    extent: FloatArray,
-    midpoints: FloatArray,
-    queue_index: IntArray,
-    queue_prob: FloatArray,
-    queue_phi: FloatArray,
-    queue_ends: IntArray,
-    failures: IntArray,
-    dynamics: FloatArray,
-    dynamics_cov: FloatArray,
-    peak: FloatArray,
-    points: FloatArray,
-    point_counts: IntArray,
-    bounds: FloatArray,
-    flag_table: IntArray,
-    flag_failures: IntArray,
-    rate: bool,
-    min_rate: float,
-    safe: IntArray,
-    threshold: float,
-    margin: float,
-    reach_horizon: int,
-    reach_radius: float,
+    tpm: Any,
+    flag_arrays: Any,
+    model: Any,
     prev_index: IntArray,
     prev_prob: FloatArray,
     prev_z: FloatArray,
     index: IntArray,
     prob: FloatArray,
     z: FloatArray,
-    recognised: int,
-    entered: bool,
-    event: int,
-    done: bool,
-    slot: int,
-    transition_bin: int,
-    risk_bin: int,
-    decide: bool,
-    proposed_bin: int,
+    at: Any,
     by_bin: FloatArray,
     verdicts: IntArray,
 ) -> tuple[int, bool, bool, float, int, int, bool]:
-    """What a step learns, then the risk reviser's decision.
+    """What a step learns, then the risk reviser's decision (:class:`Learned`'s first fields).
 
-    The arguments come in groups: the lazy TPM's (:meth:`LazyTransitions.arrays`, after its
-    learning rate), the local risk model's (:meth:`LocalRisk.arrays`, after its horizon, with
-    the reach's), the flags' (:meth:`StateFlags.arrays`, then its mode and rate), the
-    decision's settings (the reach's horizon last but one: 0 without it); then
-    the step's: the stream's previous belief and observation, this step's belief and
-    observation, the recognised state and whether the stream entered it, the event (a
-    criterion, -1: none), whether the episode ended, the stream's slot, the bins to learn the
-    transition and the risk label under (-1: none), whether to decide, the proposal's bin and
-    the decision's outputs (``by_bin``, ``verdicts``).
-
-    Returns the TPM pool slots it lacks (then nothing has changed: the shield compacts the
-    pool and calls again), whether a flag changed, whether it decided (the risk reviser,
-    once a failure was learned), and the decision (:func:`app.core.risk.decide`).
+    The parts' tuples: the lazy TPM's (:meth:`~app.core.lazy_tpm.LazyTransitions.arrays`),
+    the flags' (:meth:`~app.core.flags.StateFlags.arrays`) and the reviser's
+    (:meth:`~app.core.revisers.Reviser.step_arrays`: the local risk model's tuple,
+    :meth:`~app.core.local_risk.LocalRisk.arrays`, then the decision's safe steps, threshold
+    and margin). The step's: the stream's previous belief and observation, this step's, and
+    ``at``: the recognised state, whether the stream entered it, the event (a criterion, -1:
+    none), whether the episode ended, the stream's slot, the bins to learn the transition and
+    the risk label under (-1: none), whether to decide and the proposal's bin. The decision
+    fills ``by_bin`` and ``verdicts``.
     """
+    recognised, entered, event, done, slot, transition_bin, risk_bin, decide, proposed_bin = at
+    local, safe, threshold, margin = model
+    motion = local[13]  # the reach's tuple (app.core.reach.risk)
+    reach_horizon = motion[0]
     if transition_bin >= 0:
-        needed = lazy_tpm.learn(
-            transition_bin,
-            lr,
-            prev_index,
-            prev_prob,
-            index,
-            prob,
-            log_decay,
-            numbers,
-            row_counts,
-            pool_cols,
-            pool_vals,
-            used,
-            slots,
-        )
+        needed = lazy_tpm.learn(tpm, transition_bin, prev_index, prev_prob, index, prob)
         if needed:
             return needed, False, False, 0.0, 0, 0, False
     if risk_bin >= 0:
-        local_risk.learn_step(
-            theta,
-            cov,
-            tried,
-            low,
-            high,
-            extent,
-            midpoints,
-            queue_index,
-            queue_prob,
-            queue_phi,
-            queue_ends,
-            failures,
-            slot,
-            prev_index,
-            prev_prob,
-            prev_z,
-            risk_bin,
-            event,
-            done,
-            horizon,
-        )
+        local_risk.learn_step(local, slot, prev_index, prev_prob, prev_z, risk_bin, event, done)
         if reach_horizon > 0:
             phi = np.empty(prev_z.shape[0] + 2)
-            phi[0], phi[1:-1], phi[-1] = 1.0, prev_z, midpoints[risk_bin]
-            reach.learn(dynamics, dynamics_cov, peak, prev_index, prev_prob, phi, z)
+            phi[0], phi[1:-1], phi[-1] = 1.0, prev_z, local[7][risk_bin]
+            reach.learn(motion[2], motion[3], motion[4], prev_index, prev_prob, phi, z)
     if event >= 0 and reach_horizon > 0:
-        reach.add_failure(points, point_counts, event, z, reach_radius)
-    changed = flags.observe(flag_table, flag_failures, recognised, event, entered, rate, min_rate)
-    if not decide or not failures.any():
+        reach.add_failure(motion[5], motion[6], event, z, motion[1])
+    table, failures, rate, min_rate = flag_arrays
+    changed = flags.observe(table, failures, recognised, event, entered, rate, min_rate)
+    if not decide or not local[12].any():
         return 0, changed, False, 0.0, 0, 0, False
     limit, worst, final, kept = local_risk.decide_step(
-        theta,
-        tried,
-        low,
-        high,
-        index,
-        prob,
-        z,
-        midpoints,
-        safe,
-        proposed_bin,
-        threshold,
-        margin,
-        by_bin,
-        verdicts,
-        dynamics,
-        peak,
-        extent,
-        points,
-        point_counts,
-        bounds,
-        reach_horizon,
-        reach_radius,
+        local, index, prob, z, safe, proposed_bin, threshold, margin, by_bin, verdicts
     )
     return 0, changed, True, limit, worst, final, kept

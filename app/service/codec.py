@@ -224,7 +224,7 @@ def readable(
         "failure_points": {
             name: points.tolist() for name, points in shield.failure_points().items()
         },
-        "trial": shield.trial.view(),
+        "trial": shield.reviser.trial_view(),
     }
     if tpm == "none":
         return out

@@ -27,6 +27,7 @@ from client.shield.spaces import SAMPLE_MARGIN
 from client.shield.wrapper import SILENT_EPISODES
 from client.sim.car_following import CarFollowingEnv
 from client.sim.lead import synthetic
+from tests.core.checks import risk_parts
 
 EDGE = {"edge": "decrease"}  # pushing less is safer
 
@@ -201,7 +202,7 @@ def test_a_failure_that_does_not_end_the_episode_is_learned() -> None:
     infos = pushing(5, env)
     bumps = sum(i["event"] == "bump" for i in infos)
     assert bumps > 0
-    learned = env.shield.shield.local_risk.failures  # type: ignore[attr-defined]
+    learned = risk_parts(env.shield.shield).local_risk.failures  # type: ignore[attr-defined]
     assert learned[1] == bumps
 
 
@@ -213,7 +214,7 @@ def test_a_failure_predicate_replaces_info() -> None:
 
     env = ShieldWrapper(Ledge(), criteria=EDGE, failure=low)
     pushing(5, env)
-    assert env.shield.shield.local_risk.failures.sum() > 0  # type: ignore[attr-defined]
+    assert risk_parts(env.shield.shield).local_risk.failures.sum() > 0  # type: ignore[attr-defined]
 
 
 def test_the_same_seed_gives_the_same_shield_and_evaluation_learns_nothing() -> None:
@@ -341,11 +342,11 @@ def test_failures_reported_under_another_key_warn_once_and_say_how_to_pass_them(
     assert "failure(observation, reward, terminated, truncated, info)" in message
     assert "criteria: edge" in message
     assert caught[0].filename == __file__  # it points at the caller's step()
-    assert env.shield.shield.local_risk.failures.sum() == 0  # type: ignore[attr-defined]
+    assert risk_parts(env.shield.shield).local_risk.failures.sum() == 0  # type: ignore[attr-defined]
     # the advice works: the same environment with failure= learns and does not warn
     told = ShieldWrapper(Ledge(key="crashed"), config=ledge_config(), failure=crashed)
     assert silence_warnings(told, 60) == []
-    assert told.shield.shield.local_risk.failures.sum() > 0  # type: ignore[attr-defined]
+    assert risk_parts(told.shield.shield).local_risk.failures.sum() > 0  # type: ignore[attr-defined]
 
 
 def test_no_warning_while_failures_come_or_episodes_end_otherwise() -> None:

@@ -5,6 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from app.core import Shield
+from app.core.revisers import RiskReviser
+
+
+def risk_parts(shield: Shield) -> RiskReviser:
+    """The shield's risk reviser, whose local model, record and trial a test reads."""
+    assert isinstance(shield.reviser, RiskReviser)
+    return shield.reviser
 
 
 def check_tpm_rows_are_distributions(shield: Shield) -> None:

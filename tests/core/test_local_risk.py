@@ -11,6 +11,7 @@ import pytest
 from app.core import InvalidSnapshot, Shield, ShieldConfig
 from app.core.belief import Belief
 from app.core.local_risk import PRIOR_COV, FloatArray, LocalRisk
+from tests.core.checks import risk_parts
 from tests.core.test_risk import crash_world
 from tests.utils import assert_same
 
@@ -129,14 +130,13 @@ def test_a_snapshot_without_boxes_restores_with_none_and_a_bad_box_is_refused() 
     crash_world(shield, 10, seed=6)
     data = shield.snapshot()
     local = data["local_risk"]
-    assert shield.local_risk is not None
     assert_same(Shield.from_snapshot(data).snapshot()["local_risk"], local)
     older = {k: v for k, v in local.items() if k not in ("low", "high")}
-    restored = Shield.from_snapshot({**data, "local_risk": older}).local_risk
+    restored = risk_parts(Shield.from_snapshot({**data, "local_risk": older})).local_risk
     assert restored is not None
     boxes = restored.snapshot({})
     assert (boxes["low"] == 1.0).all() and (boxes["high"] == 0.0).all()  # all empty
-    assert_same(restored.theta, shield.local_risk.theta)
+    assert_same(restored.theta, risk_parts(shield).local_risk.theta)
     assert_same(
         Shield.from_snapshot(
             Shield.from_snapshot({**data, "local_risk": older}).snapshot()
@@ -182,7 +182,7 @@ def test_the_shield_learns_to_refuse_the_action_that_crashed() -> None:
     config = ShieldConfig.from_dict({**LOCAL, "reviser": {"activate_after_episodes": 20}})
     shield = Shield(config)
     crash_world(shield, 20, seed=1)
-    assert shield.local_risk is not None and shield.local_risk.failures.sum() > 0
+    assert risk_parts(shield).local_risk.failures.sum() > 0
     # (asked of a stream outside the trial, app.core.trial: an audited episode passes it)
     decision = shield.step([28.0, 20.0, 10.0], 1.9, stream="probe", learn=False)
     assert decision.revised and decision.action is not None and decision.action < 1.9
@@ -201,8 +201,9 @@ def test_a_model_with_pending_steps_round_trips_and_decides_alike() -> None:
     crash_world(shield, 15, seed=3)
     for t in range(3):  # a stream left in the middle of an episode
         shield.step([12.0 + t, 30.0, 11.0], 0.5, stream="open")
-    assert shield.local_risk is not None
-    assert shield.local_risk.pending(shield.streams["open"].slot) == 2  # (the first: none)
+    assert (
+        risk_parts(shield).local_risk.pending(shield.streams["open"].slot) == 2
+    )  # (the first: none)
     copy = Shield.from_snapshot(shield.snapshot())
     assert_same(copy.snapshot(), shield.snapshot())
     for speed in (25.0, 28.0, 12.0):
@@ -218,18 +219,17 @@ def test_a_model_with_pending_steps_round_trips_and_decides_alike() -> None:
 def test_a_stream_that_ends_frees_its_slot_and_the_next_stream_starts_empty() -> None:
     shield = Shield(ShieldConfig.from_dict(LOCAL))
     crash_world(shield, 5, seed=7)
-    assert shield.local_risk is not None
     for t in range(3):
         shield.step([12.0 + t, 30.0, 11.0], 0.5, stream="a")
         shield.step([20.0, 40.0 + t, 19.0], -0.5, stream="b")
     slot_a, slot_b = shield.streams["a"].slot, shield.streams["b"].slot
-    assert slot_a != slot_b and shield.local_risk.pending(slot_a) == 2
+    assert slot_a != slot_b and risk_parts(shield).local_risk.pending(slot_a) == 2
     shield.step([15.0, 30.0, 11.0], None, stream="a", done=True)
-    assert shield.local_risk.pending(slot_a) == 0  # labelled at the episode's end
+    assert risk_parts(shield).local_risk.pending(slot_a) == 0  # labelled at the episode's end
     shield.step([12.0, 30.0, 11.0], 0.5, stream="c")
     shield.step([13.0, 30.0, 11.0], 0.5, stream="c")
-    assert shield.streams["c"].slot == slot_a and shield.local_risk.pending(slot_a) == 1
-    assert shield.local_risk.pending(slot_b) == 2  # b's steps are its own
+    assert shield.streams["c"].slot == slot_a and risk_parts(shield).local_risk.pending(slot_a) == 1
+    assert risk_parts(shield).local_risk.pending(slot_b) == 2  # b's steps are its own
     copy = Shield.from_snapshot(shield.snapshot())
     assert_same(copy.snapshot(), shield.snapshot())
 
@@ -288,4 +288,4 @@ def test_extreme_observations_leave_every_risk_a_probability() -> None:
         )
         for value in decision.risk.values():
             assert 0.0 <= value <= 1.0
-    assert shield.local_risk is not None and np.isfinite(shield.local_risk.theta).all()
+    assert np.isfinite(risk_parts(shield).local_risk.theta).all()

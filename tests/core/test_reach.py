@@ -11,8 +11,11 @@ import pytest
 from app.core import InvalidConfig, InvalidSnapshot, Shield, ShieldConfig, reach
 from app.core.local_risk import PRIOR_COV
 from tests.core import reference
+from tests.core.checks import risk_parts
 from tests.core.test_risk import crash_world
 from tests.utils import assert_same
+
+NO_COV = np.zeros((0, 0, 0))  # the dynamics' covariances, which the reach's risk does not read
 
 SAFE = np.array([-1, 1], dtype=np.int64)  # collision-like, then falling-behind-like
 
@@ -78,37 +81,25 @@ def test_a_path_towards_a_failure_is_risky_and_one_away_from_it_is_not() -> None
         (np.array([1]), [0.0, 0.0]),
     ):  # safe: fast, back up after one
         reach.risk(
-            dynamics,
-            peak,
+            (3, 0.1, dynamics, NO_COV, peak, points, counts, reach.no_bounds(1)),
             extent,
+            np.array([0.25, 0.75]),
             np.array([0]),
             np.array([1.0]),
             np.array([0.5]),
-            np.array([0.25, 0.75]),
             safe,
-            points,
-            counts,
-            reach.no_bounds(1),
-            3,
-            0.1,
             out,
         )
         # slow first, then 3 steps: 0.4, 0.3, 0.2 (0.05 from the failure: half the radius)
         assert out[:, 0] == pytest.approx(expected)
     reach.risk(
-        dynamics,
-        peak,
+        (3, 0.1, dynamics, NO_COV, peak, points, np.array([[0, 0]]), reach.no_bounds(1)),
         extent,
+        np.array([0.25, 0.75]),
         np.array([0]),
         np.array([1.0]),
         np.array([0.5]),
-        np.array([0.25, 0.75]),
         np.array([-1]),
-        points,
-        np.array([[0, 0]]),
-        reach.no_bounds(1),
-        3,
-        0.1,
         out,
     )
     assert not out.any()  # no failure seen and no bound: no risk
@@ -139,19 +130,22 @@ def test_a_bound_fails_an_action_when_the_box_of_its_worst_cases_reaches_it(
     bounds[0, 0], bounds[0, 1] = 0, 0.0
     out = np.empty((2, 1))
     reach.risk(
-        CLOSING,
-        np.array([0.0, peak]),
+        (
+            5,
+            0.1,
+            CLOSING,
+            NO_COV,
+            np.array([0.0, peak]),
+            np.zeros((1, reach.MAX_POINTS, 2)),
+            np.array([[0, 0]]),
+            bounds,
+        ),
         np.array([[0.0, 0.0], [1.0, 1.0]]),
+        np.array([0.25, 0.75]),
         np.array([0]),
         np.array([1.0]),
         np.array([0.3, 0.1]),
-        np.array([0.25, 0.75]),
         np.array([-1]),
-        np.zeros((1, reach.MAX_POINTS, 2)),
-        np.array([[0, 0]]),
-        bounds,
-        5,
-        0.1,
         out,
     )
     assert out[:, 0] == pytest.approx(expected)
@@ -195,19 +189,13 @@ def test_the_reach_kernel_gives_the_reference_rollouts(seed: int) -> None:
     bounds[0, 0], bounds[0, 1] = b, 0.1
     out = np.empty((q, 2))
     reach.risk(
-        dynamics,
-        peak,
+        (horizon, radius, dynamics, NO_COV, peak, points, np.array([[5, 5], [5, 5]]), bounds),
         extent,
+        midpoints,
         index,
         prob,
         z,
-        midpoints,
         SAFE,
-        points,
-        np.array([[5, 5], [5, 5]]),
-        bounds,
-        horizon,
-        radius,
         out,
     )
     for c, safe_bin in enumerate((0, q - 1)):
@@ -257,8 +245,10 @@ def test_a_shield_learns_dynamics_and_failure_points_and_snapshots_them() -> Non
 
 def test_bounds_lie_in_the_clustering_space() -> None:
     shield = Shield(ShieldConfig())  # the collision's bound: a headway of 0
-    assert shield.local_risk is not None
-    assert shield.local_risk.bounds.tolist() == [[1.0, 0.0, np.inf], [-1.0, -np.inf, np.inf]]
+    assert risk_parts(shield).local_risk.bounds.tolist() == [
+        [1.0, 0.0, np.inf],
+        [-1.0, -np.inf, np.inf],
+    ]
     both = [
         {
             "name": "near",
@@ -271,8 +261,7 @@ def test_bounds_lie_in_the_clustering_space() -> None:
         shield.normalise(np.array([0.0, 5.0, 0.0]))[1],
         shield.normalise(np.array([0.0, 200.0, 0.0]))[1],
     )
-    assert shield.local_risk is not None
-    assert shield.local_risk.bounds.tolist() == [[1.0, z[0], z[1]]]
+    assert risk_parts(shield).local_risk.bounds.tolist() == [[1.0, z[0], z[1]]]
 
 
 def test_a_snapshot_with_a_negative_peak_is_refused() -> None:
@@ -302,15 +291,13 @@ def test_the_peak_round_trips_and_a_snapshot_from_before_it_loads_with_it_to_lea
 def test_the_extent_is_the_union_of_the_boxes_and_survives_a_snapshot() -> None:
     shield = Shield(ShieldConfig())
     crash_world(shield, 20, seed=1)
-    assert shield.local_risk is not None
-    extent = shield.local_risk.arrays()[5]
+    extent = risk_parts(shield).local_risk.arrays()[6]
     low, high = shield.snapshot()["local_risk"]["low"], shield.snapshot()["local_risk"]["high"]
     applied = low <= high
     assert np.array_equal(extent[0], np.where(applied, low, np.inf).min(axis=(0, 1)))
     assert np.array_equal(extent[1], np.where(applied, high, -np.inf).max(axis=(0, 1)))
     restored = Shield.from_snapshot(shield.snapshot())
-    assert restored.local_risk is not None
-    assert np.array_equal(restored.local_risk.arrays()[5], extent)
+    assert np.array_equal(risk_parts(restored).local_risk.arrays()[6], extent)
 
 
 def test_a_snapshot_with_a_bad_failure_point_count_is_refused() -> None:

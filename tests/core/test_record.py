@@ -21,6 +21,7 @@ from app.core.record import (
     excess,
     pooled_excess,
 )
+from tests.core.checks import risk_parts
 from tests.utils import assert_same
 
 
@@ -106,10 +107,10 @@ def backing_off_shield(episodes: bool = False) -> Shield:
 
 def test_a_shield_whose_revisions_fail_backs_off_says_so_and_keeps_its_record() -> None:
     shield = backing_off_shield()
-    counts = shield.record.counts
-    assert counts[:, REVISED_FAILED].sum() > 0 and shield.record.backed_off().any()
+    counts = risk_parts(shield).record.counts
+    assert counts[:, REVISED_FAILED].sum() > 0 and risk_parts(shield).record.backed_off().any()
     # the same settled steps, by state and by band of the proposal's predicted risk
-    bands = shield.record.bands
+    bands = risk_parts(shield).record.bands
     assert np.array_equal(bands.sum(axis=0), counts[:, : PASSED_FAILED + 1].sum(axis=0))
     assert np.count_nonzero(bands.sum(axis=1)) > 1
     backed = [shield.step([float(x), 5.0, 1.0], 2.0, learn=False) for x in np.linspace(0, 1, 21)]
@@ -119,7 +120,9 @@ def test_a_shield_whose_revisions_fail_backs_off_says_so_and_keeps_its_record() 
     )
     restored = Shield.from_snapshot(shield.snapshot())
     assert_same(restored.snapshot()["record"], shield.snapshot()["record"])
-    assert np.array_equal(restored.record.backed_off(), shield.record.backed_off())
+    assert np.array_equal(
+        risk_parts(restored).record.backed_off(), risk_parts(shield).record.backed_off()
+    )
 
 
 @pytest.mark.parametrize(
@@ -157,8 +160,8 @@ def test_a_snapshot_from_before_the_record_restores_with_nothing_counted() -> No
     snapshot = shield.snapshot()
     del snapshot["record"]
     restored = Shield.from_snapshot(snapshot)
-    assert restored.record.counts.shape == (shield.n_states, len(COLUMNS))
-    assert not restored.record.counts.any()
+    assert risk_parts(restored).record.counts.shape == (shield.n_states, len(COLUMNS))
+    assert not risk_parts(restored).record.counts.any()
 
 
 def test_revisions_are_compared_with_passes_of_the_same_predicted_risk_over_all_states() -> None:

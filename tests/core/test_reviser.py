@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from app.core.config import ReviserConfig
-from app.core.reviser import OK, inspect, noise_std, risk, search, variant_threshold
+from app.core.revisers.paper import OK, inspect, noise_std, risk, search, variant_threshold
 
 COLLISION, LARGE = 0, 1
 DIRECTIONS = ["decrease", "increase"]

@@ -21,7 +21,7 @@ from app.core import (
 from app.core.belief import Belief
 from app.core.clustering import EvolvingClusterer
 from app.core.lazy_tpm import LazyTransitions
-from app.core.reviser import noise_std, predict_ahead
+from app.core.revisers.paper import noise_std, predict_ahead
 from tests.utils import cliff_config
 
 

@@ -8,6 +8,7 @@ import pytest
 
 from app.core import InvalidSnapshot, Shield, ShieldConfig
 from app.core.trial import AUDITED, NONE, SHIELDED, Trial
+from tests.core.checks import risk_parts
 from tests.core.test_record import backing_off_shield
 
 
@@ -55,7 +56,7 @@ def test_an_episode_counts_in_its_arm_and_one_outside_the_trial_nowhere() -> Non
 
 def test_a_shield_whose_revisions_fail_audits_most_episodes_and_says_so() -> None:
     shield = harmful_shield()
-    (shielded, _), (audited, audited_failed) = shield.trial.counts.tolist()
+    (shielded, _), (audited, audited_failed) = risk_parts(shield).trial.counts.tolist()
     assert audited > 2 * shielded
     # an audited episode passes every proposal and says what it would have done
     shield.step([0.5, 5.0, 1.0], 2.0, stream="audit-me")
@@ -74,7 +75,7 @@ def test_the_trial_and_each_streams_arm_survive_a_snapshot() -> None:
     for t in range(5):
         shield.step([0.1 * t, 5.0, 1.0], 1.0, stream="open")
     restored = Shield.from_snapshot(shield.snapshot())
-    assert np.array_equal(restored.trial.counts, shield.trial.counts)
+    assert np.array_equal(risk_parts(restored).trial.counts, risk_parts(shield).trial.counts)
     assert restored.streams["open"].arm == shield.streams["open"].arm
     rng = np.random.default_rng(1)
     for _ in range(200):  # and both decide the same from here on
@@ -89,7 +90,7 @@ def test_a_snapshot_from_before_the_trial_restores_with_nothing_counted() -> Non
     for stream in snapshot["streams"].values():
         del stream["arm"], stream["failed"]
     restored = Shield.from_snapshot(snapshot)
-    assert not restored.trial.counts.any()
+    assert not risk_parts(restored).trial.counts.any()
     assert all(s.arm == NONE for s in restored.streams.values())
 
 
@@ -120,21 +121,24 @@ def test_the_paper_reviser_keeps_no_trial() -> None:
         shield.step([float(t % 7), 5.0, 1.0], 0.5)
         if t % 10 == 9:
             shield.step([1.0, 5.0, 1.0], None, done=True, event="collision")
-    assert shield.snapshot()["trial"] is None and not shield.trial.counts.any()
+    assert shield.snapshot()["trial"] is None
+    assert shield.reviser.trial_view() == {
+        arm: {"episodes": 0, "failed": 0} for arm in ("shielded", "audited")
+    }
 
 
 def test_an_audited_episode_counts_in_the_trial_and_stays_out_of_the_record() -> None:
     # the record compares the shield's own steps; an audited episode is the trial's control
     shield = harmful_shield()
-    shield.trial.draw = lambda at: AUDITED  # type: ignore[method-assign]
-    counts, bands = shield.record.counts.copy(), shield.record.bands.copy()
-    trial = shield.trial.counts.copy()
+    risk_parts(shield).trial.draw = lambda at: AUDITED  # type: ignore[method-assign]
+    counts, bands = risk_parts(shield).record.counts.copy(), risk_parts(shield).record.bands.copy()
+    trial = risk_parts(shield).trial.counts.copy()
     reasons = {shield.step([0.1 * t, 5.0, 1.0], 2.0, stream="audited").reason for t in range(10)}
     shield.step([0.5, 5.0, 1.0], None, stream="audited", done=True, event="collision")
     assert "audit" in reasons and not reasons & {"revised_safety", "revised_speed"}
-    assert np.array_equal(shield.record.counts[: counts.shape[0]], counts)
-    assert np.array_equal(shield.record.bands, bands)
-    assert (shield.trial.counts - trial).tolist() == [[0, 0], [1, 1]]
+    assert np.array_equal(risk_parts(shield).record.counts[: counts.shape[0]], counts)
+    assert np.array_equal(risk_parts(shield).record.bands, bands)
+    assert (risk_parts(shield).trial.counts - trial).tolist() == [[0, 0], [1, 1]]
 
 
 def test_no_episode_is_drawn_before_a_failure_was_learned_and_an_episode_has_ended() -> None:
@@ -143,19 +147,19 @@ def test_no_episode_is_drawn_before_a_failure_was_learned_and_an_episode_has_end
         shield.step([float(t), 5.0, 1.0], 0.5, stream="s", event="collision" if t == 2 else None)
     assert shield.streams["s"].arm == NONE
     shield.step([1.0, 5.0, 1.0], 0.5, stream="other")  # a failure learned, no episode ended
-    assert shield.local_risk is not None and shield.local_risk.any_failure
+    assert risk_parts(shield).local_risk.any_failure
     assert shield.streams["other"].arm == NONE
     shield.step([1.0, 5.0, 1.0], None, stream="s", done=True)
-    assert not shield.trial.counts.any()  # its episode was outside the trial
+    assert not risk_parts(shield).trial.counts.any()  # its episode was outside the trial
     shield.step([1.0, 5.0, 1.0], 0.5, stream="s")  # the next episode's first step draws
     assert shield.streams["s"].arm in (SHIELDED, AUDITED)
 
 
 def test_an_audit_ends_uncounted_past_twice_the_mean_episode_length() -> None:
     shield = harmful_shield()
-    shield.trial.draw = lambda at: AUDITED  # type: ignore[method-assign]
+    risk_parts(shield).trial.draw = lambda at: AUDITED  # type: ignore[method-assign]
     longest = 2.0 * shield.counters.steps / shield.counters.episodes
-    trial = shield.trial.counts.copy()
+    trial = risk_parts(shield).trial.counts.copy()
     shield.step([0.5, 5.0, 1.0], 1.0, stream="long")
     audited = 0
     while shield.streams["long"].arm == AUDITED and audited <= longest + 1:
@@ -163,4 +167,6 @@ def test_an_audit_ends_uncounted_past_twice_the_mean_episode_length() -> None:
         audited += 1
     assert shield.streams["long"].arm == NONE and audited >= int(longest) - 1
     shield.step([0.5, 5.0, 1.0], None, stream="long", done=True, event="collision")
-    assert np.array_equal(shield.trial.counts, trial)  # the episode counted in neither arm
+    assert np.array_equal(
+        risk_parts(shield).trial.counts, trial
+    )  # the episode counted in neither arm
