@@ -1,6 +1,5 @@
-"""The fourth set of held-out worlds (``bench/heldout4``): what every set must be (the checks of
-``test_heldout_sets.py``, run here on this set), and its physics goes the way the docstrings
-say. No shield is built here."""
+"""The fourth set of held-out worlds (``bench/heldout4``): its physics goes the way the docstrings
+say (what every set must be: ``test_heldout_sets.py``). No shield is built here."""
 
 from __future__ import annotations
 
@@ -12,57 +11,11 @@ import pytest
 
 import bench.heldout4
 from bench.heldout4 import arc, furnace, monorail
-from bench.worlds.__main__ import world_named
-from tests import test_heldout_sets as every_set
 from tests.test_heldout_sets import first_event
-
-# each world's failures and their declared safe directions
-DIRECTIONS: dict[str, dict[str, str]] = {
-    "furnace": {"chill": "increase", "overheat": "decrease"},
-    "monorail": {
-        "tip_left": "increase",
-        "tip_right": "decrease",
-        "gimbal_fore": "decrease",
-        "gimbal_aft": "increase",
-    },
-    "arc": {"runaway": "decrease", "extinction": "increase"},
-}
 
 
 def test_the_set_names_its_three_worlds() -> None:
-    assert bench.heldout4.NAMES == tuple(DIRECTIONS)
-
-
-@pytest.mark.parametrize("bounded", [False, True])
-@pytest.mark.parametrize("name", list(DIRECTIONS))
-def test_a_world_fails_alone_in_the_ways_its_configuration_names(name: str, bounded: bool) -> None:
-    every_set.test_a_world_fails_alone_in_the_ways_its_configuration_names(
-        bench.heldout4, name, bounded
-    )
-
-
-@pytest.mark.parametrize("name", list(DIRECTIONS))
-def test_a_configuration_names_each_failure_with_its_direction_and_bound(name: str) -> None:
-    plain, bounded = bench.heldout4.world(name), bench.heldout4.world(name, bounded=True)
-    assert {c.name: c.direction for c in plain.config.criteria} == DIRECTIONS[name]
-    assert {c.name: c.direction for c in bounded.config.criteria} == DIRECTIONS[name]
-    assert all(c.bound is None for c in plain.config.criteria)
-    assert all(c.bound is not None for c in bounded.config.criteria)
-    assert plain.config.action.n_bins == bounded.config.action.n_bins == 20
-    assert plain.name != bounded.name
-
-
-@pytest.mark.parametrize("name", list(DIRECTIONS))
-def test_a_world_replays_exactly_from_its_seed(name: str) -> None:
-    every_set.test_a_world_replays_exactly_from_its_seed(bench.heldout4, name)
-
-
-def test_an_unknown_world_is_refused_and_bench_worlds_finds_the_set() -> None:
-    every_set.test_an_unknown_world_is_refused_with_the_names_there_are(bench.heldout4)
-    assert world_named("heldout4_arc").name == "arc"
-    assert world_named("heldout4_monorail_bounded").name == "monorail-bounded"
-    with pytest.raises(SystemExit, match="in bench.heldout4; there are furnace"):
-        world_named("heldout4_nowhere")
+    assert bench.heldout4.NAMES == ("furnace", "monorail", "arc")
 
 
 @pytest.mark.parametrize("seed", range(1, 7))  # seed 0 holds for a day at full coal

@@ -1,9 +1,8 @@
-"""What every set of held-out worlds of #68 (``bench/heldout2``, ``bench/heldout3``) must be: its
+"""What every set of held-out worlds of #68 (``bench/heldout2`` to ``bench/heldout4``) must be: its
 worlds fail without help in the ways their configurations name, report the controller's task
 figure, replay from their seeds, and are found by ``python -m bench.worlds``. No shield is built
 here: these worlds stay unseen by the shield until a candidate default is judged on them. Each
-set's physics is tested in its own module (``test_heldout2_worlds.py``,
-``test_heldout3_worlds.py``)."""
+set's physics is tested in its own module (``test_heldout2_worlds.py`` and the others)."""
 
 from __future__ import annotations
 
@@ -16,6 +15,7 @@ import pytest
 
 import bench.heldout2
 import bench.heldout3
+import bench.heldout4
 from bench.worlds.__main__ import world_named
 from bench.worlds.harness import run
 
@@ -40,6 +40,16 @@ DIRECTIONS: dict[ModuleType, dict[str, dict[str, str]]] = {
             "kerb_right": "decrease",
         },
         "fusion": {"runaway": "decrease", "extinction": "increase"},
+    },
+    bench.heldout4: {
+        "furnace": {"chill": "increase", "overheat": "decrease"},
+        "monorail": {
+            "tip_left": "increase",
+            "tip_right": "decrease",
+            "gimbal_fore": "decrease",
+            "gimbal_aft": "increase",
+        },
+        "arc": {"runaway": "decrease", "extinction": "increase"},
     },
 }
 WORLDS = [(held, name) for held, names in DIRECTIONS.items() for name in names]
@@ -92,6 +102,7 @@ def test_bench_worlds_finds_each_set_by_its_prefix() -> None:
     assert world_named("heldout2_reactor").name == "reactor"
     assert world_named("heldout3_fusion").name == "fusion"
     assert world_named("heldout3_trailer_bounded").name == "trailer-bounded"
+    assert world_named("heldout4_monorail_bounded").name == "monorail-bounded"
     with pytest.raises(SystemExit, match="in bench.heldout3; there are anaesthesia"):
         world_named("heldout3_nowhere")
 
