@@ -67,6 +67,7 @@ class Record:
         # per band of the proposal's predicted risk, over all states: the first four columns
         self.bands = np.zeros((len(EDGES) + 1, PASSED_FAILED + 1), dtype=np.int64)
         self._pending: dict[str, deque[tuple[int, bool, int]]] = {}
+        self._revised_failures = 0  # the failures after revisions, over every state
         self.everywhere = False  # whether the shield backs off in every state
 
     def add_state(self) -> None:
@@ -102,6 +103,7 @@ class Record:
                     hit.add(state)
         for state in hit:
             self.counts[state, REVISED_FAILURES] += 1
+        self._revised_failures += len(hit)
         self.everywhere = self._backs_off_everywhere()
 
     def forget(self, stream: str) -> None:
@@ -132,7 +134,7 @@ class Record:
         than the passed ones whose proposals the model judged as risky (the bands of
         :data:`EDGES`), by more than :data:`Z_EVERYWHERE` standard errors
         (:func:`pooled_excess`)."""
-        if self.counts[:, REVISED_FAILURES].sum() < MIN_FAILURES:
+        if self._revised_failures < MIN_FAILURES:
             return False
         return pooled_excess(self.bands, self.window) > Z_EVERYWHERE
 
@@ -221,6 +223,7 @@ class Record:
             high=len(EDGES),
         )
         self.counts, self.bands = counts.copy(), bands.copy()
+        self._revised_failures = int(counts[:, REVISED_FAILURES].sum())
         at = 0
         for name, length in zip(names, lengths.tolist(), strict=True):
             self._pending[name] = deque(
