@@ -20,6 +20,7 @@ from app.core.config import (
     ShieldConfig,
     TransitionConfig,
 )
+from app.core.decision import Candidate, Decision
 from app.core.errors import (
     InvalidAction,
     InvalidConfig,
@@ -28,7 +29,7 @@ from app.core.errors import (
     ShieldError,
     UnknownCriterion,
 )
-from app.core.shield import Candidate, Decision, Shield
+from app.core.shield import Shield
 
 compiled.keep_cache_current()  # before any kernel loads from the cache (app.core.compiled)
 

@@ -21,7 +21,7 @@ from app.core import actions, revisers, snapshot, views
 from app.core.belief import Belief, recognise
 from app.core.clustering import NEW, REPLACED, STATES, EvolvingClusterer
 from app.core.config import ShieldConfig, TransitionConfig
-from app.core.decision import Candidate, Decision
+from app.core.decision import Decision
 from app.core.errors import (
     InvalidAction,
     InvalidConfig,
@@ -37,8 +37,6 @@ from app.core.observation import check as check_observation
 from app.core.step import Learned, learn_and_decide, observe
 from app.core.stream import Counters, StepInput, StreamState
 from app.core.tpm import DenseTransitions, TransitionModel
-
-__all__ = ["Candidate", "Counters", "Decision", "Shield", "StepInput", "StreamState"]
 
 FloatArray = npt.NDArray[np.float64]
 # Observations beyond this magnitude are refused: their squares (distances, potentials) would

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from app.core import Decision, Shield, ShieldConfig, ShieldError
-from app.core.shield import StepInput
+from app.core.stream import StepInput
 from app.service import codec
 from app.service.idempotency import Entry, KeyReused, KeyWindow, fingerprint
 from app.service.limits import ModelLimits
