@@ -5,8 +5,8 @@ recognises the belief, learns the transitions and the flags, and calls its revis
 points of a step; a reviser keeps whatever else it learns (its own models, per state and per
 stream), stores it in the model's snapshot and shows it in the model's views. The hooks a
 reviser has no use for are no-ops here, so a new reviser is one subclass that says how it
-decides (:meth:`Reviser.decide`, :meth:`Reviser.what_if`) and one entry in
-:data:`app.core.revisers.REVISERS`.
+decides (:meth:`Reviser.decide`, :meth:`Reviser.what_if`), one entry in
+:data:`app.core.revisers.REVISERS` and its name among ``reviser.method``'s values.
 
 A reviser that decides inside the compiled step (:attr:`Reviser.compiled`) hands the step its
 arrays as one tuple (:meth:`Reviser.step_arrays`, :func:`app.core.step.learn_and_decide`'s
@@ -104,7 +104,9 @@ class Reviser:
     # --- snapshot --------------------------------------------------------------------------
 
     def snapshot(self) -> dict[str, Any]:
-        """The reviser's part of the model's snapshot (keys beside the e-FSM's)."""
+        """The reviser's part of the model's snapshot (keys beside the e-FSM's): every
+        snapshot holds the keys of every reviser, null where this one keeps nothing, so that
+        its layout does not depend on the configuration."""
         return {"rng": None, "local_risk": None, "record": None, "trial": None}
 
     def restore(self, data: dict[str, Any]) -> None:
