@@ -547,6 +547,35 @@ def learn_step(
 
 
 @njit(cache=True)
+def learn_outcome(
+    model: Any,
+    slot: int,
+    prev_index: IntArray,
+    prev_prob: FloatArray,
+    prev_z: FloatArray,
+    action_bin: int,
+    failure: int,
+    ended: bool,
+    z: FloatArray,
+) -> bool:
+    """What a shield's step teaches ``model`` (:meth:`LocalRisk.arrays`): the stream's previous
+    step (``prev_*``, ``action_bin`` applied; -1: none to learn) into the risk labels
+    (:func:`learn_step`) and, with the reach, its move to ``z`` into the dynamics; ``z`` kept
+    as a failure point of ``failure`` (-1: none). Returns whether any failure was learned."""
+    failures, motion = model[12], model[13]
+    reach_horizon = motion[0]
+    if action_bin >= 0:
+        learn_step(model, slot, prev_index, prev_prob, prev_z, action_bin, failure, ended)
+        if reach_horizon > 0:
+            phi = np.empty(prev_z.shape[0] + 2)
+            phi[0], phi[1:-1], phi[-1] = 1.0, prev_z, model[7][action_bin]
+            reach.learn(motion[2], motion[3], motion[4], prev_index, prev_prob, phi, z)
+    if failure >= 0 and reach_horizon > 0:
+        reach.add_failure(motion[5], motion[6], failure, z, motion[1])
+    return bool(failures.any())
+
+
+@njit(cache=True)
 def _fit(
     theta: FloatArray,
     cov: FloatArray,
@@ -654,15 +683,7 @@ def decide_step(
     """:meth:`LocalRisk.decide` on ``model`` (:meth:`LocalRisk.arrays`): :func:`_read` and the
     reach (:func:`app.core.reach.risk`), each under the monotone prior, and the decision on
     both (:func:`app.core.risk.decide`)."""
-    theta, tried, low, high, extent, midpoints = (
-        model[1],
-        model[3],
-        model[4],
-        model[5],
-        model[6],
-        model[7],
-    )
-    motion = model[13]
+    _, theta, _, tried, low, high, extent, midpoints, _, _, _, _, _, motion = model
     _read(theta, tried, low, high, index, prob, z, midpoints, safe, by_bin)
     risk.monotone(by_bin, safe)
     reached = np.zeros(by_bin.shape)

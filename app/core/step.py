@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from app.core import flags, lazy_tpm, local_risk, reach
+from app.core import flags, lazy_tpm, local_risk
 from app.core.clustering import learn_and_recognise
 from app.core.observation import normalise
 
@@ -96,23 +96,16 @@ def learn_and_decide(
     """
     recognised, entered, event, done, slot, transition_bin, risk_bin, decide, proposed_bin = at
     local, safe, threshold, margin = model
-    motion = local[13]  # the reach's tuple (app.core.reach.risk)
-    reach_horizon = motion[0]
     if transition_bin >= 0:
         needed = lazy_tpm.learn(tpm, transition_bin, prev_index, prev_prob, index, prob)
         if needed:
             return needed, False, False, 0.0, 0, 0, False
-    if risk_bin >= 0:
-        local_risk.learn_step(local, slot, prev_index, prev_prob, prev_z, risk_bin, event, done)
-        if reach_horizon > 0:
-            phi = np.empty(prev_z.shape[0] + 2)
-            phi[0], phi[1:-1], phi[-1] = 1.0, prev_z, local[7][risk_bin]
-            reach.learn(motion[2], motion[3], motion[4], prev_index, prev_prob, phi, z)
-    if event >= 0 and reach_horizon > 0:
-        reach.add_failure(motion[5], motion[6], event, z, motion[1])
+    any_failure = local_risk.learn_outcome(
+        local, slot, prev_index, prev_prob, prev_z, risk_bin, event, done, z
+    )
     table, failures, rate, min_rate = flag_arrays
     changed = flags.observe(table, failures, recognised, event, entered, rate, min_rate)
-    if not decide or not local[12].any():
+    if not decide or not any_failure:
         return 0, changed, False, 0.0, 0, 0, False
     limit, worst, final, kept = local_risk.decide_step(
         local, index, prob, z, safe, proposed_bin, threshold, margin, by_bin, verdicts
